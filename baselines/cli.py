@@ -1,0 +1,56 @@
+"""The ``safe-mapf`` command line.
+
+Each subcommand lives in its own module under :mod:`baselines.commands` and exposes
+``register(subparsers)``, which adds an ``argparse`` parser whose ``func`` default runs the
+command and returns an exit code. Heavy imports happen inside the command functions, so
+``safe-mapf --help`` stays fast.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+#: Subcommand modules, in the order ``--help`` lists them.
+COMMAND_MODULES = (
+    "baselines.commands.envs",
+    "baselines.commands.bench_env",
+    "baselines.commands.mapf",
+    "baselines.commands.train",
+    "baselines.commands.evaluate",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the top-level parser with every available subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="safe-mapf",
+        description="Safe multi-agent navigation: environments, agents, planning and evaluation.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:  # a command whose module is not part of this build
+            if exc.name == name:
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``safe-mapf`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"safe-mapf {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
