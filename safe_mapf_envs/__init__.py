@@ -1,0 +1,38 @@
+"""Safe single- and multi-agent navigation environments.
+
+Importing the package registers the Gymnasium ids listed in
+:data:`safe_mapf_envs.registration.ENV_SPECS`, e.g.::
+
+    import gymnasium as gym
+    import safe_mapf_envs  # noqa: F401  (or use the id "safe_mapf_envs:SafeCentralObstacle-v0")
+
+    env = gym.make("SafeCentralObstacle-v0", render_mode="rgb_array")
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    info["cost"]  # the safety cost of this step
+
+This package imports no torch and nothing from ``agents`` or ``baselines``.
+"""
+from .cost import COST_FUNCTIONS, ObstacleField
+from .maps import MAPS, GridMap, get_map
+from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
+from .scenario import NavigationScenario
+from .single_agent import SafeNavigationEnv
+from .wrappers import SafetyGymnasiumStyle
+
+register_envs()
+
+__all__ = [
+    "COST_FUNCTIONS",
+    "ENV_SPECS",
+    "EnvSpec",
+    "GridMap",
+    "MAPS",
+    "NavigationScenario",
+    "ObstacleField",
+    "SafeNavigationEnv",
+    "SafetyGymnasiumStyle",
+    "env_spec",
+    "get_map",
+    "register_envs",
+]

@@ -1,0 +1,53 @@
+"""One table of environment ids, registered with Gymnasium on ``import safe_mapf_envs``."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, List
+
+import gymnasium as gym
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """One registered environment: its id, entry point, map and keyword arguments."""
+
+    id: str
+    entry_point: str
+    layout: str
+    obs_type: str = "vector"
+    max_episode_steps: int = 20
+    kwargs: Dict[str, Any] = field(default_factory=dict)
+
+
+_SINGLE = "safe_mapf_envs.single_agent:SafeNavigationEnv"
+
+#: Every registered id. Training ids use 20 steps per episode, as in the paper.
+ENV_SPECS: List[EnvSpec] = [
+    EnvSpec(f"Safe{name}-v0", _SINGLE, name, kwargs={"layout": name})
+    for name in ("CentralObstacle", "CenterDot", "FourRooms", "Spiral", "Maze", "U", "Tunnel")
+]
+
+
+def register_envs() -> None:
+    """Register every id in :data:`ENV_SPECS` (idempotent)."""
+    for spec in ENV_SPECS:
+        if spec.id in gym.registry:
+            continue
+        gym.register(
+            id=spec.id,
+            entry_point=spec.entry_point,
+            max_episode_steps=spec.max_episode_steps,
+            kwargs=dict(spec.kwargs),
+        )
+
+
+def env_spec(env_id: str) -> EnvSpec:
+    """The :class:`EnvSpec` of a registered id (the ``safe_mapf_envs:`` prefix is accepted)."""
+    env_id = env_id.split(":", 1)[-1]
+    for spec in ENV_SPECS:
+        if spec.id == env_id:
+            return spec
+    raise KeyError(f"unknown env id {env_id!r}; registered: {', '.join(s.id for s in ENV_SPECS)}")
+
+
+__all__ = ["ENV_SPECS", "EnvSpec", "env_spec", "register_envs"]
