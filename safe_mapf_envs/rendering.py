@@ -126,4 +126,37 @@ class TopDownRenderer:
         return img
 
 
-__all__ = ["PALETTE", "TopDownRenderer", "agent_colour"]
+class HumanWindow:
+    """Shows frames in a matplotlib window (``render_mode="human"``).
+
+    OpenCV's headless build has no windows, so the human mode draws through matplotlib. It
+    needs a display: constructing it without one raises ``RuntimeError`` naming the problem.
+    """
+
+    def __init__(self, title: str) -> None:
+        import os
+
+        if os.name != "nt" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise RuntimeError('render_mode="human" needs a display (DISPLAY is not set); use "rgb_array"')
+        import matplotlib.pyplot as plt
+
+        plt.ion()
+        self._plt = plt
+        self._fig, ax = plt.subplots(num=title)
+        ax.set_axis_off()
+        self._ax = ax
+        self._im = None
+
+    def show(self, frame: np.ndarray) -> None:
+        if self._im is None:
+            self._im = self._ax.imshow(frame)
+        else:
+            self._im.set_data(frame)
+        self._fig.canvas.draw_idle()
+        self._plt.pause(0.001)
+
+    def close(self) -> None:
+        self._plt.close(self._fig)
+
+
+__all__ = ["HumanWindow", "PALETTE", "TopDownRenderer", "agent_colour"]

@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .rendering import TopDownRenderer
+from .rendering import HumanWindow, TopDownRenderer
 from .scenario import NavigationScenario
 from .world import World
 
@@ -97,7 +97,7 @@ class SafeNavigationEnv(gym.Env):
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, obstacles,
     agent, goal, trail and planned waypoints (see :meth:`set_waypoints`); ``"human"`` shows it
-    in an OpenCV window where a display exists.
+    in a matplotlib window and needs a display (``RuntimeError`` otherwise).
 
     ## Version History
     - v0: initial release.
@@ -149,6 +149,7 @@ class SafeNavigationEnv(gym.Env):
         self._trail: list = []
         self._waypoints: Optional[np.ndarray] = None
         self._renderer: Optional[TopDownRenderer] = None
+        self._window: Optional[HumanWindow] = HumanWindow(type(self).__name__) if render_mode == "human" else None
 
     # ----------------------------------------------------------------- properties
     @property
@@ -284,22 +285,15 @@ class SafeNavigationEnv(gym.Env):
             self._pos[None], goals=self._goal[None], trails=[np.array(self._trail)],
             waypoints=[self._waypoints] if self._waypoints is not None else None,
         )
-        if self.render_mode == "human":
-            import cv2
-
-            cv2.imshow("safe_mapf_envs", cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
-            cv2.waitKey(1)
+        if self._window is not None:
+            self._window.show(img)
             return None
         return img
 
     def close(self):
-        if self.render_mode == "human":
-            try:
-                import cv2
-
-                cv2.destroyAllWindows()
-            except Exception:  # no display: nothing to close
-                pass
+        if self._window is not None:
+            self._window.close()
+            self._window = None
         self._renderer = None
 
 

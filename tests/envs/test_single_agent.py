@@ -261,3 +261,10 @@ def test_rgb_render_draws_agent_goal_and_waypoints():
     env.unwrapped.set_waypoints(np.array([[10.0, 45.0], [40.0, 50.0]]))
     after = env.render()
     assert (after != before).any()
+
+
+def test_human_mode_without_display_names_the_problem(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="display"):
+        gym.make("SafeCentralObstacle-v0", render_mode="human")
