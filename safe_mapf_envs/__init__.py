@@ -11,16 +11,22 @@ Importing the package registers the Gymnasium ids listed in
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["cost"]  # the safety cost of this step
 
+    # N agents on the same map (PettingZoo; ``env``/``raw_env`` give the AEC form)
+    par = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=10)
+
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
 from .cost import COST_FUNCTIONS, ObstacleField
 from .maps import MAPS, GridMap, get_map
+from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
 from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
 from .scenario import NavigationScenario
 from .single_agent import SafeNavigationEnv
 from .wrappers import SafetyGymnasiumStyle
 
 register_envs()
+
+from . import multi  # noqa: E402  (per-map PettingZoo modules; needs the id table above)
 
 __all__ = [
     "COST_FUNCTIONS",
@@ -30,9 +36,14 @@ __all__ = [
     "MAPS",
     "NavigationScenario",
     "ObstacleField",
+    "SafeMultiNavigationEnv",
     "SafeNavigationEnv",
     "SafetyGymnasiumStyle",
     "env_spec",
+    "env",
     "get_map",
+    "multi",
+    "parallel_env",
+    "raw_env",
     "register_envs",
 ]

@@ -142,7 +142,11 @@ class HumanWindow:
 
         plt.ion()
         self._plt = plt
-        self._fig, ax = plt.subplots(num=title)
+        # a figure of its own per window (a figure looked up by title would be shared, and
+        # pyplot refuses to create a second one with the same title)
+        self._fig, ax = plt.subplots()
+        if self._fig.canvas.manager is not None:
+            self._fig.canvas.manager.set_window_title(title)
         ax.set_axis_off()
         self._ax = ax
         self._im = None

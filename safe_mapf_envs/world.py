@@ -5,7 +5,9 @@ just outside the world confine the agents. An action is the intended displacemen
 environment step. It is applied as a velocity over ``substeps`` physics sub-steps, and the
 velocity is set again before every sub-step, so an agent that hits a wall slides along it
 instead of bouncing, and no sub-step moves an agent further than about a third of its radius
-(no tunnelling).
+(no tunnelling). Contacts are resolved at the start of the next physics step, so every
+environment step ends with settling steps at rest that push agents out of walls and out of
+each other (a crowd pushing into itself needs several) before the final positions are read.
 
 A new :class:`pymunk.Space` is built for every episode: reusing a space across resets is not
 deterministic, rebuilding it is (same start + same actions = same trajectory, bit for bit).
@@ -17,10 +19,17 @@ from typing import List, Sequence, Set, Tuple
 import numpy as np
 import pymunk
 
+try:  # batched body access (pymunk >= 6.6); without it the bodies are read one by one
+    from pymunk import batch as _batch
+except ImportError:  # pragma: no cover - older pymunk
+    _batch = None
+
 Box = Tuple[float, float, float, float]
 
 _AGENT_TYPE = 1
 _WALL_THICKNESS = 10.0
+_BATCH_MIN_AGENTS = 4
+_MAX_EXTRA_SETTLE = 30  # settling steps at most on top of the first (jammed crowds)
 
 
 class World:
@@ -55,6 +64,8 @@ class World:
         w, h = self.size
         t = _WALL_THICKNESS
         walls = list(boxes) + [(-t, -t, w + t, 0.0), (-t, h, w + t, h + t), (-t, 0.0, 0.0, h), (w, 0.0, w + t, h)]
+        self._wall_lo = np.array([b[:2] for b in walls], dtype=np.float64)
+        self._wall_hi = np.array([b[2:] for b in walls], dtype=np.float64)
         for x0, y0, x1, y1 in walls:
             shape = pymunk.Poly(space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
             shape.elasticity = 0.0
@@ -73,13 +84,44 @@ class World:
             self.bodies.append(body)
         self.parked = np.zeros(len(self.bodies), dtype=bool)
         self._contacts: Set[Tuple[int, int]] = set()
+        self._recent: Set[Tuple[int, int]] = set()  # contacts of the latest physics step
+        # resting contacts keep about collision_slop of overlap; settle until within twice that
+        self._settle_tol = 2.0 * space.collision_slop
         if len(self.bodies) > 1:
             space.on_collision(_AGENT_TYPE, _AGENT_TYPE, pre_solve=self._record_contact)
+        # With many agents, setting velocities and reading positions body by body dominates
+        # the step; pymunk's batch API does both for all bodies in one call each (its fixed
+        # overhead only pays off from a few agents on).
+        self._batched = _batch is not None and len(self.bodies) >= _BATCH_MIN_AGENTS
+        if self._batched:
+            self._get_buf = _batch.Buffer()
+            self._set_buf = _batch.Buffer()
+            self._index_bodies()
+
+    def _index_bodies(self) -> None:
+        """Find where each agent sits in pymunk's body iteration order (used by the batch API)."""
+        buf = self._get_buf
+        buf.clear()
+        _batch.get_space_bodies(self.space, _batch.BodyFields.BODY_ID, buf)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp)
+        where = {int(b): k for k, b in enumerate(ids)}
+        self._rows = np.array([where[b.id] for b in self.bodies], dtype=np.intp)
+        # velocities of every body pymunk iterates over (the static body's row stays 0)
+        self._vel = np.zeros((len(ids), 2), dtype=np.float64)
+        self._set_buf.set_float_buf(self._vel)
+
+    def _read_positions(self) -> np.ndarray:
+        buf = self._get_buf
+        buf.clear()
+        _batch.get_space_bodies(self.space, _batch.BodyFields.POSITION, buf)
+        return np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._rows]
 
     def _record_contact(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
         a, b = arbiter.shapes
         i, j = a.agent_index, b.agent_index  # type: ignore[attr-defined]
-        self._contacts.add((i, j) if i < j else (j, i))
+        pair = (i, j) if i < j else (j, i)
+        self._contacts.add(pair)
+        self._recent.add(pair)
 
     @property
     def n_agents(self) -> int:
@@ -87,14 +129,20 @@ class World:
 
     def positions(self) -> np.ndarray:
         """Current agent centres, shape ``(N, 2)``."""
+        if self._batched:
+            return self._read_positions()
         return np.array([tuple(b.position) for b in self.bodies], dtype=np.float64).reshape(-1, 2)
 
     def park(self, index: int) -> None:
         """Freeze agent ``index`` where it stands: it becomes an immovable obstacle for the others."""
         body = self.bodies[index]
         body.velocity = (0.0, 0.0)
-        body.body_type = pymunk.Body.KINEMATIC
+        # Static, not kinematic: pymunk still integrates a kinematic body, and the position
+        # correction left over from its last contact would move it once more.
+        body.body_type = pymunk.Body.STATIC
         self.parked[index] = True
+        if self._batched:
+            self._index_bodies()
 
     def step(self, displacements: np.ndarray) -> Tuple[np.ndarray, Set[Tuple[int, int]]]:
         """Advance one environment step.
@@ -112,29 +160,71 @@ class World:
         n = len(self.bodies)
         trace = np.empty((self.substeps, n, 2), dtype=np.float64)
         self._contacts = set()
-        moving = [(b, (float(v[0]), float(v[1]))) for b, v, p in zip(self.bodies, vel, self.parked) if not p]
-        dt = self._dt
-        step = self.space.step
-        bodies = self.bodies
+        space, dt = self.space, self._dt
+        if self._batched:
+            buf, fields, set_bodies = self._set_buf, _batch.BodyFields.VELOCITY, _batch.set_space_bodies
+            self._vel[self._rows] = np.where(self.parked[:, None], 0.0, vel)
+
+            def push() -> None:
+                set_bodies(space, fields, buf)
+
+            def halt() -> None:
+                self._vel[:] = 0.0
+                set_bodies(space, fields, buf)
+
+            read = self._read_positions
+        else:
+            moving = [(b, (float(v[0]), float(v[1]))) for b, v, p in zip(self.bodies, vel, self.parked) if not p]
+            bodies = self.bodies
+
+            def push() -> None:
+                for body, v in moving:
+                    body.velocity = v
+
+            def halt() -> None:
+                for body, _ in moving:
+                    body.velocity = (0.0, 0.0)
+
+            def read() -> List[Tuple[float, float]]:
+                return [tuple(body.position) for body in bodies]
+
         for s in range(self.substeps):
-            for body, v in moving:
-                body.velocity = v
-            step(dt)
-            row = trace[s]
-            for i, body in enumerate(bodies):
-                row[i] = body.position
+            push()
+            space.step(dt)
+            trace[s] = read()
         # Contacts found in a sub-step are resolved at the start of the next one, so the
-        # last sub-step may end slightly inside a wall: one settling step at rest pushes the
-        # agents out before the final positions are read.
-        for body, _ in moving:
-            body.velocity = (0.0, 0.0)
-        step(dt)
-        row = trace[-1]
-        for i, body in enumerate(bodies):
-            row[i] = body.position
-        for body, _ in moving:
-            body.velocity = (0.0, 0.0)
+        # last sub-step may end slightly inside a wall or another agent: settling steps at
+        # rest push the agents apart before the final positions are read. One is enough
+        # against walls; a crowd pushing into itself needs more: each settling step applies
+        # the corrections the previous one solved for, until the deepest overlap of an agent
+        # that touched another is within twice the collision slop.
+        for k in range(1 + _MAX_EXTRA_SETTLE):
+            if k and self._overlap(trace[-1]) <= self._settle_tol:
+                break
+            halt()
+            self._recent = set()
+            space.step(dt)
+            trace[-1] = read()
+        halt()
         return trace, self._contacts
+
+    def _overlap(self, pos: np.ndarray) -> float:
+        """Deepest overlap of an agent pushed by others this step, with another agent or a wall.
+
+        An agent on its own is always out of the walls after one settling step; only agents
+        that touched another one need checking.
+        """
+        if not self._contacts:
+            return 0.0
+        r = self.agent_radius
+        worst = 0.0
+        if self._recent:
+            pairs = np.array(list(self._recent), dtype=np.intp)
+            d = pos[pairs[:, 0]] - pos[pairs[:, 1]]
+            worst = 2.0 * r - float(np.sqrt((d * d).sum(-1)).min())
+        p = pos[np.unique(np.array(list(self._contacts), dtype=np.intp))]
+        gap = np.maximum(np.maximum(self._wall_lo[None] - p[:, None], p[:, None] - self._wall_hi[None]), 0.0)
+        return max(worst, r - float(np.sqrt((gap * gap).sum(-1)).min()))
 
 
 __all__ = ["World"]

@@ -1,0 +1,692 @@
+"""The multi-agent goal-conditioned safe navigation environment (PettingZoo parallel API).
+
+The parallel environment is the real one; the AEC form is derived from it with
+:func:`pettingzoo.utils.conversions.parallel_to_aec`. Reach them by a registered single-agent
+id (the multi-agent env inherits its map and keyword arguments)::
+
+    import safe_mapf_envs
+
+    env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=10)
+    observations, infos = env.reset(seed=0)
+    while env.agents:
+        actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+        observations, rewards, terminations, truncations, infos = env.step(actions)
+
+or through the per-map modules, e.g. ``safe_mapf_envs.multi.central_obstacle_v0.parallel_env()``.
+"""
+from __future__ import annotations
+
+import re
+import warnings
+from collections.abc import Mapping
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils import wrappers
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from .registration import env_spec
+from .rendering import HumanWindow, TopDownRenderer
+from .scenario import NavigationScenario
+from .single_agent import check_action
+from .world import World
+
+_RESET_OPTIONS = ("starts", "goals", "goal_distance")
+
+
+def _snake(name: str) -> str:
+    """``CentralObstacle`` -> ``central_obstacle``."""
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
+
+
+def _check_count(value, what: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+class SafeMultiNavigationEnv(ParallelEnv):
+    """N goal-conditioned agents navigating a shared map with a safety cost (PettingZoo parallel).
+
+    ## Description
+    ``n_agents`` circular agents move in one 2D world of static box obstacles, each towards its
+    own goal, as in the multi-agent experiments of the paper "Safe Multi-Agent Navigation
+    guided by Goal-Conditioned Safe Reinforcement Learning". All agents are bodies of one
+    pymunk space: they collide with the walls and with each other. Every agent sees exactly
+    what the single-agent environment
+    (:class:`~safe_mapf_envs.single_agent.SafeNavigationEnv`) shows its agent, so a
+    single-agent goal-conditioned policy runs unchanged on every agent. Being near obstacles
+    is unsafe: every step reports each agent's safety cost in ``infos[agent]["cost"]``; it is
+    never folded into the reward.
+
+    World coordinates: ``x`` along the map's columns, ``y`` along its rows (row 0 at the top).
+
+    ## Action Space
+    Per agent ``Box(-1, 1, (2,), float32)``: the intended displacement ``(dx, dy)`` in world
+    units over one step, applied in physics sub-steps (agents slide along walls and each
+    other, never pass through them). ``step`` needs an action for every agent in
+    :attr:`agents`; a missing one, an unknown agent name, NaN, inf or a wrong shape raise
+    ``ValueError``; actions for agents that are already done are ignored; out-of-range
+    actions are clipped to ``[-1, 1]``. Optional Gaussian noise (``action_noise``) is added
+    after clipping.
+
+    ## Observation Space
+    Per agent the single-agent ``Dict`` (Gymnasium-Robotics goal convention):
+
+    - ``observation``: the agent's position divided by the world size, in ``[0, 1]^2``;
+    - ``achieved_goal``: the same as ``observation``;
+    - ``desired_goal``: the agent's goal divided by the world size;
+    - ``neighbors`` (only with ``observe_neighbors=k > 0``): shape ``(k, 2)``, the positions
+      of the ``k`` nearest other agents (parked ones included) relative to this agent,
+      divided by the world size, nearest first; rows beyond the ``n_agents - 1`` other agents
+      are zero.
+
+    All are ``float32``. :meth:`state` is the global view: every agent's normalised position
+    then every goal, flattened (``state_space``: ``Box(0, 1, (4 * n_agents,), float32)``).
+    Subclasses provide other observation types (``obs_type``) by overriding
+    :meth:`_make_observation_space` and :meth:`_observe`.
+
+    ## Rewards
+    ``-1`` per step for every agent that acted (Search on the Replay Buffer convention).
+
+    ## Costs
+    ``infos[agent]["cost"]``: the obstacle cost exactly as in the single-agent environment
+    (the largest cost over the positions of the step's sub-steps, ``C = 2 - 2h/r`` within
+    ``cost_radius`` of an obstacle for ``cost_fn="linear"``), plus ``collision_cost`` (default
+    0) for every contact with another agent during the step. ``infos[agent]`` also carries
+    ``obstacle_cost`` (the obstacle part alone), ``collisions`` (the number of other agents
+    touched during the step), ``collided_with`` (their names), ``position`` and ``goal``
+    (ground truth in world units, for evaluation only), ``distance_to_goal`` and
+    ``is_success``.
+
+    ## Starting State
+    Starts and goals are sampled uniformly in the free space, starts at least
+    ``min_separation`` apart from each other and goals likewise. ``reset(options=...)``
+    accepts:
+
+    - ``{"starts": [(x, y), ...], "goals": [(x, y), ...]}`` (one per agent, world units; either
+      key alone works) to pin a problem. Every position must be free (as in the single-agent
+      env) and no two starts (or goals) closer than ``2 * agent_radius``; otherwise
+      ``ValueError`` names the agent;
+    - ``{"goal_distance": (lo, hi)}`` to sample each goal at a ground-truth geodesic distance
+      from its agent's start within the band.
+
+    Other keys are ignored with a warning. With ``max_start_cost`` set, sampled starts are
+    restricted to positions whose cost is at most that value.
+
+    ## Episode End
+    An agent is ``terminated`` when its centre comes within ``goal_threshold`` of its goal: it
+    then stays parked where it arrived, an immovable obstacle for the others (the MAPF
+    convention), and leaves :attr:`agents`. After ``max_cycles`` steps every remaining agent
+    is ``truncated``.
+
+    ## Arguments
+    ``safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=4, render_mode=None,
+    **kwargs)`` or ``SafeMultiNavigationEnv(layout, n_agents, render_mode, **kwargs)`` with
+    the single-agent keyword arguments
+
+    - ``agent_radius`` (0.5), ``cost_radius`` (map default), ``cost_fn`` ("linear"),
+      ``boundary_cost`` (False), ``goal_threshold`` (1.0), ``action_noise`` (0.0),
+      ``substeps`` (4), ``max_start_cost`` (None), ``goal_distance`` (None);
+
+    and the multi-agent ones
+
+    - ``max_cycles`` (300, the paper's evaluation limit): steps before truncation;
+    - ``min_separation`` (``2 * agent_radius + goal_threshold``): smallest distance between
+      sampled starts and between sampled goals. The default keeps an agent parked anywhere
+      within reach of its goal clear of every other goal; it must be at least
+      ``2 * agent_radius``;
+    - ``collision_cost`` (0.0): cost added per contact with another agent;
+    - ``observe_neighbors`` (0): adds the ``neighbors`` key with this many nearest agents;
+    - ``obs_type`` ("vector"): the observation type (see :attr:`obs_types`).
+
+    ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, every agent
+    in its own colour with its goal and trail, parked agents ringed, collision markers and
+    the planned waypoints of :meth:`set_waypoints`; ``"human"`` shows it in a matplotlib
+    window and needs a display (``RuntimeError`` otherwise).
+
+    ## Version History
+    - v0: initial release.
+    """
+
+    metadata = {
+        "render_modes": ["rgb_array", "human"],
+        "name": "safe_multi_navigation_v0",
+        "is_parallelizable": True,
+        "render_fps": 10,
+    }
+    #: Observation types this class builds; subclasses extend it with their own.
+    obs_types: Tuple[str, ...] = ("vector",)
+
+    def __init__(
+        self,
+        layout="CentralObstacle",
+        n_agents: int = 4,
+        render_mode: Optional[str] = None,
+        *,
+        obs_type: str = "vector",
+        max_cycles: int = 300,
+        agent_radius: float = 0.5,
+        cost_radius: Optional[float] = None,
+        cost_fn: str = "linear",
+        boundary_cost: bool = False,
+        goal_threshold: float = 1.0,
+        action_noise: float = 0.0,
+        substeps: int = 4,
+        max_start_cost: Optional[float] = None,
+        goal_distance: Optional[Tuple[float, float]] = None,
+        min_separation: Optional[float] = None,
+        collision_cost: float = 0.0,
+        observe_neighbors: int = 0,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if obs_type not in self.obs_types:
+            raise ValueError(f"obs_type must be one of {list(self.obs_types)} for {type(self).__name__}, got {obs_type!r}")
+        n_agents = _check_count(n_agents, "n_agents", 1)
+        self.max_cycles = _check_count(max_cycles, "max_cycles", 1)
+        substeps = _check_count(substeps, "substeps", 1)
+        self.observe_neighbors = _check_count(observe_neighbors, "observe_neighbors", 0)
+        if not np.isfinite(action_noise) or action_noise < 0:
+            raise ValueError(f"action_noise must be >= 0, got {action_noise!r}")
+        if not np.isfinite(goal_threshold) or goal_threshold <= 0:
+            raise ValueError(f"goal_threshold must be > 0, got {goal_threshold!r}")
+        if not np.isfinite(collision_cost) or collision_cost < 0:
+            raise ValueError(f"collision_cost must be >= 0, got {collision_cost!r}")
+        self.scenario = NavigationScenario(
+            layout, agent_radius=agent_radius, cost_radius=cost_radius, cost_fn=cost_fn, boundary_cost=boundary_cost
+        )
+        radius = self.scenario.agent_radius
+        if min_separation is None:
+            min_separation = 2.0 * radius + goal_threshold
+        if not np.isfinite(min_separation) or min_separation < 2.0 * radius:
+            raise ValueError(
+                f"min_separation must be at least 2 * agent_radius = {2.0 * radius:g} (agents would overlap), "
+                f"got {min_separation!r}"
+            )
+        self.render_mode = render_mode
+        self.obs_type = obs_type
+        self.goal_threshold = float(goal_threshold)
+        self.action_noise = float(action_noise)
+        self.substeps = substeps
+        self.max_start_cost = max_start_cost
+        self.goal_distance = goal_distance
+        self.min_separation = float(min_separation)
+        self.collision_cost = float(collision_cost)
+        self.metadata = {**type(self).metadata, "name": f"{_snake(self.scenario.layout.name)}_v0"}
+        self._inv_size = 1.0 / self.scenario.size_arr
+
+        self.possible_agents: List[str] = [f"agent_{i}" for i in range(n_agents)]
+        self.agent_name_mapping: Dict[str, int] = {a: i for i, a in enumerate(self.possible_agents)}
+        self.agents: List[str] = []
+        self.action_spaces = {a: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self.possible_agents}
+        self.observation_spaces = {a: self._make_observation_space() for a in self.possible_agents}
+        self.state_space = spaces.Box(0.0, 1.0, shape=(4 * n_agents,), dtype=np.float32)
+
+        self.np_random, self.np_random_seed = seeding.np_random()
+        self._world: Optional[World] = None
+        self._pos = np.zeros((n_agents, 2))
+        self._goals = np.zeros((n_agents, 2))
+        self._goals_norm = np.zeros((n_agents, 2), dtype=np.float32)
+        self._live = np.zeros(n_agents, dtype=bool)
+        self._live_idx = np.zeros(0, dtype=np.intp)
+        self._t = 0
+        self._trail: List[np.ndarray] = []
+        self._collision_points: List[np.ndarray] = []
+        self._waypoints: List[Optional[np.ndarray]] = [None] * n_agents
+        self._renderer: Optional[TopDownRenderer] = None
+        self._window: Optional[HumanWindow] = HumanWindow(type(self).__name__) if render_mode == "human" else None
+
+    # ----------------------------------------------------------------- spaces
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object on every call)."""
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent`` (the same object on every call)."""
+        return self.action_spaces[agent]
+
+    def _make_observation_space(self) -> spaces.Dict:
+        """One agent's observation space; override together with :meth:`_observe`."""
+        pos = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
+        keys: Dict[str, spaces.Space] = {"observation": pos, "achieved_goal": pos, "desired_goal": pos}
+        if self.observe_neighbors:
+            keys["neighbors"] = spaces.Box(-1.0, 1.0, shape=(self.observe_neighbors, 2), dtype=np.float32)
+        return spaces.Dict(keys)
+
+    # ----------------------------------------------------------------- properties
+    @property
+    def n_agents(self) -> int:
+        """Number of agents, live or not (``len(possible_agents)``)."""
+        return len(self.possible_agents)
+
+    @property
+    def field(self):
+        """The :class:`~safe_mapf_envs.cost.ObstacleField` (obstacles, cost function)."""
+        return self.scenario.field
+
+    @property
+    def world_size(self) -> Tuple[float, float]:
+        """World extent ``(width, height)`` in units; observations are positions divided by it."""
+        return self.scenario.size
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Ground-truth positions of all agents (world units), shape ``(n_agents, 2)``."""
+        return self._pos.copy()
+
+    @property
+    def goals(self) -> np.ndarray:
+        """Ground-truth goals of all agents (world units), shape ``(n_agents, 2)``."""
+        return self._goals.copy()
+
+    @property
+    def parked(self) -> np.ndarray:
+        """``True`` for agents that reached their goal and are parked there."""
+        return np.zeros(self.n_agents, bool) if self._world is None else self._world.parked.copy()
+
+    # ----------------------------------------------------------------- helpers
+    def normalize(self, positions: np.ndarray) -> np.ndarray:
+        """World-unit positions ``(..., 2)`` to observations in ``[0, 1]`` (float32)."""
+        return (np.asarray(positions, dtype=np.float64) * self._inv_size).astype(np.float32)
+
+    def denormalize(self, observations: np.ndarray) -> np.ndarray:
+        """Observations in ``[0, 1]`` back to world-unit positions."""
+        return np.asarray(observations, dtype=np.float64) * self.scenario.size_arr
+
+    def sample_states(self, n: int, rng: Optional[np.random.Generator] = None, max_cost: Optional[float] = None) -> np.ndarray:
+        """``n`` random free positions (world units), shape ``(n, 2)``."""
+        return self.scenario.sample_states(n, rng if rng is not None else self.np_random, max_cost=max_cost)
+
+    def geodesic_distance(self, a, b) -> np.ndarray:
+        """Ground-truth shortest collision-free path length between world points (evaluation only)."""
+        return self.scenario.geodesic_distance(a, b)
+
+    def set_waypoints(
+        self, waypoints: Union[None, Mapping[str, Optional[np.ndarray]], Sequence[Optional[np.ndarray]]]
+    ) -> None:
+        """Planned waypoints to draw in rendered frames.
+
+        Args:
+            waypoints: a dict from agent name to that agent's waypoints (world units,
+                ``(K, 2)``, or ``None`` to clear them; agents not named keep theirs), a
+                sequence of ``n_agents`` such entries in agent order, or ``None`` to clear all.
+        """
+        if waypoints is None:
+            self._waypoints = [None] * self.n_agents
+            return
+        if isinstance(waypoints, Mapping):
+            unknown = [a for a in waypoints if a not in self.agent_name_mapping]
+            if unknown:
+                raise ValueError(f"set_waypoints: unknown agent names {unknown}; agents are {self._agent_range()}")
+            items = [(self.agent_name_mapping[a], w) for a, w in waypoints.items()]
+        else:
+            if len(waypoints) != self.n_agents:
+                raise ValueError(
+                    f"set_waypoints: a sequence needs one entry per agent ({self.n_agents}), got {len(waypoints)}; "
+                    "pass a dict agent -> waypoints for some agents only"
+                )
+            items = list(enumerate(waypoints))
+        for i, w in items:
+            if w is None:
+                self._waypoints[i] = None
+                continue
+            arr = np.asarray(w, dtype=np.float64)
+            if arr.size == 0:
+                self._waypoints[i] = None
+                continue
+            if arr.ndim != 2 or arr.shape[1] != 2:
+                raise ValueError(f"set_waypoints: waypoints of {self.possible_agents[i]} must have shape (K, 2), got {arr.shape}")
+            self._waypoints[i] = arr
+
+    def _agent_range(self) -> str:
+        return f"agent_0 .. agent_{self.n_agents - 1}"
+
+    # ----------------------------------------------------------------- problem set-up
+    def _check_positions(self, points, what: str) -> np.ndarray:
+        """Validate user-given starts or goals: one free position per agent, no two overlapping."""
+        n, sc = self.n_agents, self.scenario
+        try:
+            p = np.asarray(points, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{what}s must be one (x, y) pair per agent ({n} agents), got {points!r}") from exc
+        if p.shape != (n, 2):
+            raise ValueError(f"{what}s must be one (x, y) pair per agent: shape ({n}, 2), got shape {p.shape}")
+        finite = np.isfinite(p).all(axis=1)
+        ok = finite.copy()
+        ok[finite] = sc.is_free(p[finite])
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            sc.check_position(p[i], f"{what} of agent_{i}")  # raises with the precise reason
+        diff = p[:, None] - p[None]
+        dist = np.sqrt((diff * diff).sum(-1))
+        close = np.triu(dist < 2.0 * sc.agent_radius, k=1)
+        if close.any():
+            i, j = (int(k) for k in np.argwhere(close)[0])
+            raise ValueError(
+                f"{what}s of agent_{i} and agent_{j} are {dist[i, j]:.4g} apart, closer than "
+                f"2 * agent_radius = {2.0 * sc.agent_radius:g}: the agents would overlap"
+            )
+        return p
+
+    def _sample_separated(self, rng: np.random.Generator, what: str, max_cost: Optional[float] = None) -> np.ndarray:
+        """``n_agents`` free positions at least ``min_separation`` apart.
+
+        Every round redraws the later agent of each pair that is too close, so the result
+        depends on the generator alone.
+        """
+        n, sc, sep = self.n_agents, self.scenario, self.min_separation
+        pts = sc.sample_states(n, rng, max_cost=max_cost)
+        for _ in range(1000):
+            diff = pts[:, None] - pts[None]
+            close = np.triu((diff * diff).sum(-1) < sep * sep, k=1)
+            redraw = np.flatnonzero(close.any(axis=0))
+            if len(redraw) == 0:
+                return pts
+            pts[redraw] = sc.sample_states(len(redraw), rng, max_cost=max_cost)
+        raise ValueError(
+            f"could not place {n} {what}s at least min_separation={sep:g} apart on {sc.layout.name}; "
+            "use fewer agents or a smaller min_separation"
+        )
+
+    def _sample_goals_in_band(self, starts: np.ndarray, band, rng: np.random.Generator) -> np.ndarray:
+        """One goal per agent at a geodesic distance from its own start within ``band``.
+
+        Each goal needs a geodesic query from its own start, hence one draw per agent; a draw
+        too close to an earlier agent's goal is repeated.
+        """
+        sc, sep = self.scenario, self.min_separation
+        goals = np.empty_like(starts)
+        for i, start in enumerate(starts):
+            for _ in range(100):
+                g = sc.sample_goal_in_band(start, band, rng)
+                if i == 0 or np.min(np.hypot(*(goals[:i] - g).T)) >= sep:
+                    goals[i] = g
+                    break
+            else:
+                raise ValueError(
+                    f"could not place the goal of agent_{i} in the goal_distance band {tuple(band)} at least "
+                    f"min_separation={sep:g} from the other goals; use fewer agents or a wider band"
+                )
+        return goals
+
+    # ----------------------------------------------------------------- observations
+    def _observe(self, idx: np.ndarray) -> Dict[str, Any]:
+        """Observations of the agents with indices ``idx``, keyed by agent name.
+
+        The one place observations are built: subclasses with another ``obs_type`` override
+        it (and :meth:`_make_observation_space`). Ground truth is in ``self._pos`` and
+        ``self._goals`` (world units, all agents).
+        """
+        n = len(idx)
+        buf = np.empty((n, 3, 2), dtype=np.float32)
+        pos = self._pos[idx]
+        buf[:, 0] = pos * self._inv_size
+        buf[:, 1] = buf[:, 0]
+        buf[:, 2] = self._goals_norm[idx]
+        names = [self.possible_agents[i] for i in idx.tolist()]
+        if not self.observe_neighbors:
+            return {
+                name: {"observation": b[0], "achieved_goal": b[1], "desired_goal": b[2]}
+                for name, b in zip(names, buf)
+            }
+        nb = self._neighbors(idx, pos)
+        return {
+            name: {"observation": b[0], "achieved_goal": b[1], "desired_goal": b[2], "neighbors": k}
+            for name, b, k in zip(names, buf, nb)
+        }
+
+    def _neighbors(self, idx: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Normalised offsets to the ``observe_neighbors`` nearest other agents, ``(len(idx), k, 2)``."""
+        k = self.observe_neighbors
+        m = min(k, self.n_agents - 1)
+        out = np.zeros((len(idx), k, 2), dtype=np.float32)
+        if m == 0:
+            return out
+        rel = self._pos[None] - pos[:, None]  # (n, N, 2), world units
+        d2 = (rel * rel).sum(-1)
+        d2[np.arange(len(idx)), idx] = np.inf  # not oneself
+        order = np.argsort(d2, axis=1, kind="stable")[:, :m]
+        out[:, :m] = np.take_along_axis(rel, order[..., None], axis=1) * self._inv_size
+        return out
+
+    def _infos(self, idx: np.ndarray, obstacle_cost: np.ndarray, dist: np.ndarray, counts: np.ndarray,
+               partners: Dict[int, List[int]]) -> Dict[str, Dict[str, Any]]:
+        """Per-agent infos; ``dist`` is each agent's distance to its goal, ``counts`` its contacts."""
+        pos, goals = self._pos.copy(), self._goals.copy()  # copies: the caller may keep or edit them
+        cnt = counts[idx]
+        cost = obstacle_cost + self.collision_cost * cnt if self.collision_cost else obstacle_cost
+        names, thr = self.possible_agents, self.goal_threshold
+        return {
+            names[i]: {
+                "cost": c,
+                "obstacle_cost": oc,
+                "position": pos[i],
+                "goal": goals[i],
+                "distance_to_goal": d,
+                "is_success": d <= thr,
+                "collisions": k,
+                "collided_with": [names[j] for j in partners[i]] if k else [],
+            }
+            for i, c, oc, d, k in zip(idx.tolist(), cost.tolist(), obstacle_cost.tolist(), dist.tolist(), cnt.tolist())
+        }
+
+    # ----------------------------------------------------------------- PettingZoo API
+    def reset(self, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(_RESET_OPTIONS), key=str)
+        if unknown:
+            warnings.warn(f"ignoring unknown reset options {unknown}; known: {list(_RESET_OPTIONS)}", stacklevel=2)
+        sc, rng = self.scenario, self.np_random
+        if options.get("starts") is not None:
+            starts = self._check_positions(options["starts"], "start")
+        else:
+            starts = self._sample_separated(rng, "start", max_cost=self.max_start_cost)
+        band = options.get("goal_distance", self.goal_distance)
+        if options.get("goals") is not None:
+            goals = self._check_positions(options["goals"], "goal")
+        elif band is not None:
+            goals = self._sample_goals_in_band(starts, band, rng)
+        else:
+            goals = self._sample_separated(rng, "goal")
+        n = self.n_agents
+        # a new pymunk space every episode: reusing one across resets is not deterministic
+        self._world = World(sc.size, sc.boxes, starts, sc.agent_radius, self.substeps)
+        self._pos = starts.copy()
+        self._goals = goals
+        self._goals_norm = self.normalize(goals)
+        self._live = np.ones(n, dtype=bool)
+        self._live_idx = np.arange(n)
+        self._t = 0
+        self.agents = self.possible_agents[:]
+        self._trail = [starts.copy()]
+        self._collision_points = []
+        idx = self._live_idx
+        dist = np.sqrt(((starts - goals) ** 2).sum(-1))
+        infos = self._infos(idx, sc.field.cost(starts), dist, np.zeros(n, np.int64), {})
+        return self._observe(idx), infos
+
+    def _parse_actions(self, actions) -> np.ndarray:
+        """Actions of the live agents as an ``(n_live, 2)`` float64 array, validated."""
+        if not isinstance(actions, Mapping):
+            raise ValueError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
+        agents = self.agents
+        missing = [a for a in agents if a not in actions]
+        if missing:
+            raise ValueError(f"missing actions for live agents {missing}: every agent in env.agents needs one")
+        if len(actions) != len(agents):
+            unknown = [a for a in actions if a not in self.agent_name_mapping]
+            if unknown:
+                raise ValueError(f"actions for unknown agents {unknown}; agents are {self._agent_range()}")
+        acts = [actions[a] for a in agents]
+        try:
+            arr = np.array(acts, dtype=np.float64)
+            ok = arr.shape == (len(agents), 2) and bool(np.isfinite(arr).all())
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:  # find the culprit and say what is wrong with it
+            for name, act in zip(agents, acts):
+                try:
+                    check_action(act)
+                except ValueError as exc:
+                    raise ValueError(f"{name}: {exc}") from None
+            raise ValueError(f"actions must be (2,) arrays of finite numbers, got {actions!r}")
+        return arr
+
+    def step(self, actions: Dict[str, Any]):
+        if self._world is None:
+            raise RuntimeError("call reset() before step()")
+        if not self.agents:
+            if not isinstance(actions, Mapping):
+                raise ValueError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
+            return {}, {}, {}, {}, {}
+        a = np.clip(self._parse_actions(actions), -1.0, 1.0)
+        if self.action_noise > 0:
+            a += self.np_random.normal(0.0, self.action_noise, size=a.shape)
+        idx = self._live_idx
+        n = self.n_agents
+        disp = np.zeros((n, 2))
+        disp[idx] = a
+        trace, contacts = self._world.step(disp)
+        self._pos = trace[-1]
+        obstacle_cost = self.scenario.field.cost(trace[:, idx]).max(axis=0)
+
+        counts = np.zeros(n, dtype=np.int64)
+        partners: Dict[int, List[int]] = {}
+        if contacts:
+            pairs = np.array(sorted(contacts), dtype=np.intp)
+            np.add.at(counts, pairs.ravel(), 1)
+            for i, j in pairs.tolist():
+                partners.setdefault(i, []).append(j)
+                partners.setdefault(j, []).append(i)
+            for lst in partners.values():
+                lst.sort()
+
+        self._t += 1
+        truncated = self._t >= self.max_cycles
+        names = self.agents
+        dist = np.sqrt(((self._pos[idx] - self._goals[idx]) ** 2).sum(-1))
+        infos = self._infos(idx, obstacle_cost, dist, counts, partners)
+        reached = dist <= self.goal_threshold
+        for i in idx[reached].tolist():
+            self._world.park(i)
+        observations = self._observe(idx)
+        rewards = dict.fromkeys(names, -1.0)
+        terminations = dict(zip(names, reached.tolist()))
+        truncations = dict.fromkeys(names, truncated)
+        if truncated or reached.any():
+            self._live[idx[reached]] = False
+            if truncated:
+                self._live[:] = False
+            self._live_idx = np.flatnonzero(self._live)
+            self.agents = [self.possible_agents[i] for i in self._live_idx.tolist()]
+
+        if self.render_mode is not None:
+            self._trail.append(self._pos.copy())
+            for i, j in contacts:
+                self._collision_points.append(0.5 * (self._pos[i] + self._pos[j]))
+            if self.render_mode == "human":
+                self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        """Every agent's normalised position, then every normalised goal, flattened (float32)."""
+        return np.concatenate([self.normalize(self._pos).ravel(), self._goals_norm.ravel()])
+
+    # ----------------------------------------------------------------- rendering
+    def render(self):
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if self._world is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            self._renderer = TopDownRenderer(self.scenario.field, agent_radius=self.scenario.agent_radius)
+        trails = np.stack(self._trail, axis=1)  # (N, T, 2)
+        img = self._renderer.render(
+            self._pos, goals=self._goals, trails=list(trails), waypoints=self._waypoints,
+            collisions=self._collision_points, parked=self._world.parked,
+        )
+        if self._window is not None:
+            self._window.show(img)
+            return None
+        return img
+
+    def close(self) -> None:
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+        self._renderer = None
+
+
+# --------------------------------------------------------------------- factories
+def parallel_env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> SafeMultiNavigationEnv:
+    """The multi-agent env on the map of a registered single-agent id.
+
+    Args:
+        env_id: a registered id such as ``"SafeCentralObstacle-v0"`` (the
+            ``"safe_mapf_envs:"`` prefix is accepted); its map, observation type and keyword
+            arguments are inherited.
+        n_agents: number of agents.
+        **kwargs: :class:`SafeMultiNavigationEnv` arguments (``render_mode``, ``max_cycles``,
+            ...); they override the id's.
+    """
+    try:
+        spec = env_spec(env_id)
+    except KeyError as exc:
+        raise ValueError(exc.args[0]) from None
+    merged = {**spec.kwargs, **kwargs}
+    merged.setdefault("layout", spec.layout)
+    if spec.obs_type != "vector":
+        merged.setdefault("obs_type", spec.obs_type)
+    return SafeMultiNavigationEnv(n_agents=n_agents, **merged)
+
+
+def raw_env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> AECEnv:
+    """The AEC form of :func:`parallel_env`, without wrappers."""
+    return parallel_to_aec(parallel_env(env_id, n_agents=n_agents, **kwargs))
+
+
+def env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> AECEnv:
+    """The AEC form of :func:`parallel_env` with PettingZoo's order-enforcing wrapper."""
+    return wrappers.OrderEnforcingWrapper(raw_env(env_id, n_agents=n_agents, **kwargs))
+
+
+def map_factories(env_id: str, module: str) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
+    """``(parallel_env, raw_env, env)`` bound to one registered id, for a per-map module.
+
+    The functions take ``n_agents=4`` and the keyword arguments of
+    :class:`SafeMultiNavigationEnv`; they are named after ``module`` so they pickle.
+    """
+    spec = env_spec(env_id)
+
+    def _parallel_env(n_agents: int = 4, **kwargs) -> SafeMultiNavigationEnv:
+        return parallel_env(spec.id, n_agents=n_agents, **kwargs)
+
+    def _raw_env(n_agents: int = 4, **kwargs) -> AECEnv:
+        return raw_env(spec.id, n_agents=n_agents, **kwargs)
+
+    def _env(n_agents: int = 4, **kwargs) -> AECEnv:
+        return env(spec.id, n_agents=n_agents, **kwargs)
+
+    docs = {
+        "parallel_env": f"The {spec.layout} map with ``n_agents`` agents (PettingZoo parallel API).",
+        "raw_env": f"The {spec.layout} map with ``n_agents`` agents, AEC form without wrappers.",
+        "env": f"The {spec.layout} map with ``n_agents`` agents, AEC form with the order-enforcing wrapper.",
+    }
+    out = []
+    for name, fn in (("parallel_env", _parallel_env), ("raw_env", _raw_env), ("env", _env)):
+        fn.__name__ = fn.__qualname__ = name
+        fn.__module__ = module
+        fn.__doc__ = docs[name] + " Keyword arguments as for :class:`SafeMultiNavigationEnv`."
+        out.append(fn)
+    return tuple(out)  # type: ignore[return-value]
+
+
+__all__ = ["SafeMultiNavigationEnv", "env", "map_factories", "parallel_env", "raw_env"]
