@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test
+from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test, state_test
 
 import safe_mapf_envs
 from safe_mapf_envs import ENV_SPECS, SafeMultiNavigationEnv, multi
@@ -16,7 +16,7 @@ from safe_mapf_envs.multi import central_obstacle_v0
 from safe_mapf_envs.rendering import agent_colour
 from safe_mapf_envs.world import World
 
-SINGLE_IDS = [s.id for s in ENV_SPECS if s.entry_point.endswith("SafeNavigationEnv")]
+VECTOR_IDS = [s.id for s in ENV_SPECS if s.entry_point.endswith("SafeNavigationEnv") and s.obs_type == "vector"]
 AGENT_COUNTS = [1, 5, 20]
 
 
@@ -55,6 +55,10 @@ def test_max_cycles_on_every_map(env_id):
     max_cycles_test(multi.MODULES[env_id])
 
 
+def test_state():
+    state_test(central_obstacle_v0.env(n_agents=5), central_obstacle_v0.parallel_env(n_agents=5))
+
+
 @pytest.mark.parametrize("n", AGENT_COUNTS)
 def test_render(n, monkeypatch):
     import matplotlib
@@ -65,7 +69,7 @@ def test_render(n, monkeypatch):
 
 
 def test_every_single_agent_map_has_a_module():
-    assert set(multi.MODULES) == set(SINGLE_IDS)
+    assert set(VECTOR_IDS) <= set(multi.MODULES)
     for env_id, mod in multi.MODULES.items():
         env = mod.parallel_env(n_agents=2)
         assert env.scenario.layout.name == safe_mapf_envs.env_spec(env_id).layout
