@@ -11,16 +11,20 @@ Importing the package registers the Gymnasium ids listed in
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["cost"]  # the safety cost of this step
 
+    # visual navigation: RGB-D panoramas (4 views x 32 x 32 x RGB+depth) in furnished apartments
+    vis = gym.make("SafeApartment0-v0")
+
     # N agents on the same map (PettingZoo; ``env``/``raw_env`` give the AEC form)
     par = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=10)
 
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
 from .cost import COST_FUNCTIONS, ObstacleField
-from .maps import MAPS, GridMap, get_map
+from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
 from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
 from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
 from .scenario import NavigationScenario
+from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout
 from .single_agent import SafeNavigationEnv
 from .wrappers import SafetyGymnasiumStyle
 
@@ -29,6 +33,8 @@ register_envs()
 from . import multi  # noqa: E402  (per-map PettingZoo modules; needs the id table above)
 
 __all__ = [
+    "APARTMENTS",
+    "Apartment",
     "COST_FUNCTIONS",
     "ENV_SPECS",
     "EnvSpec",
@@ -36,9 +42,11 @@ __all__ = [
     "MAPS",
     "NavigationScenario",
     "ObstacleField",
+    "PanoramaSensor",
     "SafeMultiNavigationEnv",
     "SafeNavigationEnv",
     "SafetyGymnasiumStyle",
+    "Scene",
     "env_spec",
     "env",
     "get_map",
@@ -46,4 +54,6 @@ __all__ = [
     "parallel_env",
     "raw_env",
     "register_envs",
+    "render_panoramas",
+    "scene_for_layout",
 ]

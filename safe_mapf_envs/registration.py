@@ -6,6 +6,8 @@ from typing import Any, Dict, List
 
 import gymnasium as gym
 
+from .maps.apartments import APARTMENT_ENV_KWARGS
+
 
 @dataclass(frozen=True)
 class EnvSpec:
@@ -26,6 +28,15 @@ ENV_SPECS: List[EnvSpec] = [
     EnvSpec(f"Safe{name}-v0", _SINGLE, name, kwargs={"layout": name})
     for name in ("CentralObstacle", "CenterDot", "FourRooms", "Spiral", "Maze", "U", "Tunnel")
 ]
+# Visual navigation: furnished apartments in metres seen through RGB-D panoramas, and the 2D
+# benchmark map seen the same way.
+ENV_SPECS += [
+    EnvSpec(f"Safe{name}-v0", _SINGLE, name, obs_type="panorama",
+            kwargs={"layout": name, "obs_type": "panorama", **APARTMENT_ENV_KWARGS})
+    for name in ("Apartment0", "Apartment1", "Apartment2", "Apartment3")
+]
+ENV_SPECS.append(EnvSpec("SafeCentralObstacleVisual-v0", _SINGLE, "CentralObstacle", obs_type="panorama",
+                         kwargs={"layout": "CentralObstacle", "obs_type": "panorama"}))
 
 
 def register_envs() -> None:

@@ -9,6 +9,7 @@ from gymnasium import spaces
 
 from .rendering import HumanWindow, TopDownRenderer
 from .scenario import NavigationScenario
+from .sensors import PanoramaSensor, scene_for_layout
 from .world import World
 
 
@@ -41,11 +42,11 @@ class SafeNavigationEnv(gym.Env):
     ``(W*f) x (H*f)`` units.
 
     ## Action Space
-    ``Box(-1, 1, (2,), float32)``: the intended displacement ``(dx, dy)`` in world units over
-    one step. It is applied in physics sub-steps, so the agent slides along walls and never
-    passes through them. Out-of-range actions are clipped to ``[-1, 1]``; NaN, inf and wrong
-    shapes raise ``ValueError``. Optional Gaussian noise (``action_noise``) is added after
-    clipping.
+    ``Box(-1, 1, (2,), float32)``: the intended displacement ``(dx, dy)`` over one step, in
+    units of ``action_scale`` world units (1 on the 2D maps, 0.25 m on the apartments). It is
+    applied in physics sub-steps, so the agent slides along walls and never passes through
+    them. Out-of-range actions are clipped to ``[-1, 1]``; NaN, inf and wrong shapes raise
+    ``ValueError``. Optional Gaussian noise (``action_noise``) is added after clipping.
 
     ## Observation Space
     A ``Dict`` in the goal-conditioned convention of Gymnasium-Robotics (usable with SB3's
@@ -58,9 +59,21 @@ class SafeNavigationEnv(gym.Env):
     All are ``float32``. Ground-truth positions in world units are in ``info["position"]`` and
     ``info["goal"]`` (for evaluation, never meant as policy input).
 
+    With ``obs_type="panorama"`` (the ``SafeApartment*`` ids) the three keys are images
+    instead: ``Box(0, 255, (4, S, S, 4), uint8)``, the views north, east, south and west
+    (``-y``, ``+x``, ``+y``, ``-x``), each ``S x S`` (32) pixels with channels R, G, B and depth
+    (``255 * min(d / sensor range, 1)``), rendered by
+    :class:`~safe_mapf_envs.sensors.PanoramaSensor` from the agent's position
+    (``observation``, ``achieved_goal``) and from the goal (``desired_goal``, rendered once per
+    episode), as in the paper's visual tasks. On the 2D maps the walls are extruded to a
+    height (see :func:`~safe_mapf_envs.sensors.grid_scene`). The images never depend on
+    ``render_mode``. ``sensor_kwargs`` sets the camera (``image_size``, ``fov``,
+    ``camera_height``, ``max_range``).
+
     ## Rewards
     ``-1`` on every step (Search on the Replay Buffer convention), so a value function counts
-    the steps to the goal. :meth:`compute_reward` returns the same for any goal.
+    the steps to the goal. :meth:`compute_reward` returns the same for any goal, vectors or
+    images.
 
     ## Costs
     ``info["cost"]`` is the largest cost over the positions of the step's sub-steps:
@@ -85,6 +98,13 @@ class SafeNavigationEnv(gym.Env):
     ``truncated`` after ``max_episode_steps`` (20 for the registered ids, as in the paper; pass
     ``max_episode_steps=...`` to ``gymnasium.make`` for longer evaluation episodes).
 
+    Termination is always decided from ground truth. :meth:`compute_terminated` sees only the
+    goals it is given: with vector goals it applies the same ``goal_threshold`` rule; with
+    image goals it cannot recover positions, so it returns ``True`` exactly where the two
+    panoramas are identical pixel for pixel (a relabelled goal that is the achieved panorama
+    itself). Near the goal, ``step`` may terminate while the images still differ; use
+    ``info["is_success"]`` to evaluate.
+
     ## Arguments
     ``gymnasium.make("SafeCentralObstacle-v0", render_mode=None, **kwargs)`` with kwargs:
 
@@ -93,7 +113,15 @@ class SafeNavigationEnv(gym.Env):
       ``cost_fn`` ("linear"), ``boundary_cost`` (False);
     - ``goal_threshold`` (1.0), ``action_noise`` (0.0, std of Gaussian noise on the action),
       ``substeps`` (4);
-    - ``max_start_cost`` (None), ``goal_distance`` (None: default band for sampled goals).
+    - ``max_start_cost`` (None), ``goal_distance`` (None: default band for sampled goals);
+    - ``obs_type`` ("vector" or "panorama"), ``action_scale`` (1.0; world units per unit of
+      action), ``sensor_kwargs`` (None: :class:`~safe_mapf_envs.sensors.PanoramaSensor`
+      arguments for panoramas).
+
+    The apartment ids (``SafeApartment0-v0`` .. ``SafeApartment3-v0``) are in metres with
+    ``agent_radius=0.2``, ``action_scale=0.25``, ``goal_threshold=0.5``, cost radius 1 and
+    panorama observations; ``SafeCentralObstacleVisual-v0`` is the 2D benchmark seen in
+    panoramas.
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, obstacles,
     agent, goal, trail and planned waypoints (see :meth:`set_waypoints`); ``"human"`` shows it
@@ -119,7 +147,14 @@ class SafeNavigationEnv(gym.Env):
         substeps: int = 4,
         max_start_cost: Optional[float] = None,
         goal_distance: Optional[Tuple[float, float]] = None,
+        obs_type: str = "vector",
+        action_scale: float = 1.0,
+        sensor_kwargs: Optional[Dict[str, Any]] = None,
     ) -> None:
+        if obs_type not in ("vector", "panorama"):
+            raise ValueError(f"obs_type must be 'vector' or 'panorama', got {obs_type!r}")
+        if not np.isfinite(action_scale) or action_scale <= 0:
+            raise ValueError(f"action_scale must be a positive number, got {action_scale!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if substeps < 1:
@@ -139,7 +174,16 @@ class SafeNavigationEnv(gym.Env):
         self.goal_distance = goal_distance
         self._inv_size = 1.0 / self.scenario.size_arr
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        pos_space = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
+        self.obs_type = obs_type
+        self.action_scale = float(action_scale)
+        self.sensor: Optional[PanoramaSensor] = None
+        if obs_type == "panorama":
+            self.sensor = PanoramaSensor(scene_for_layout(self.scenario.layout), **(sensor_kwargs or {}))
+            pos_space = spaces.Box(0, 255, shape=self.sensor.shape, dtype=np.uint8)
+        else:
+            pos_space = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
+        self._goal_ndim = len(pos_space.shape)
+        self._goal_image: Optional[np.ndarray] = None
         self.observation_space = spaces.Dict(
             {"observation": pos_space, "achieved_goal": pos_space, "desired_goal": pos_space}
         )
@@ -194,6 +238,9 @@ class SafeNavigationEnv(gym.Env):
         self._waypoints = None if waypoints is None else np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
 
     def _obs(self) -> Dict[str, np.ndarray]:
+        if self.sensor is not None:
+            img = self.sensor.render(self._pos)
+            return {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
         p = self.normalize(self._pos)
         return {"observation": p, "achieved_goal": p.copy(), "desired_goal": self.normalize(self._goal)}
 
@@ -228,6 +275,8 @@ class SafeNavigationEnv(gym.Env):
         else:
             goal = sc.sample_states(1, rng)[0]
         self._goal = goal
+        if self.sensor is not None:
+            self._goal_image = self.sensor.render(goal)
         self._world = World(sc.size, sc.boxes, start[None], sc.agent_radius, self.substeps)
         self._pos = start.copy()
         self._trail = [start.copy()]
@@ -241,7 +290,7 @@ class SafeNavigationEnv(gym.Env):
         a = np.clip(a, -1.0, 1.0)
         if self.action_noise > 0:
             a = a + self.np_random.normal(0.0, self.action_noise, size=2)
-        trace, _ = self._world.step(a[None])
+        trace, _ = self._world.step(a[None] * self.action_scale)
         pts = trace[:, 0]
         cost = float(self.scenario.field.cost(pts).max())
         self._pos = pts[-1].copy()
@@ -258,20 +307,28 @@ class SafeNavigationEnv(gym.Env):
     def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
         """Reward for (batches of) achieved/desired goals: -1 everywhere, as returned by :meth:`step`."""
         a = np.asarray(achieved_goal)
-        shape = a.shape[:-1]
+        shape = a.shape[: a.ndim - self._goal_ndim]
         if shape == ():
             return -1.0
         return -np.ones(shape, dtype=np.float32)
 
     def compute_terminated(self, achieved_goal, desired_goal, info) -> np.ndarray:
-        """``True`` where the achieved goal is within ``goal_threshold`` world units of the desired goal."""
+        """``True`` where the achieved goal is within ``goal_threshold`` world units of the desired goal.
+
+        With panorama goals: ``True`` where the two images are identical (see Episode End).
+        """
+        if self.sensor is not None:
+            a, d = np.asarray(achieved_goal), np.asarray(desired_goal)
+            done = np.all(a == d, axis=tuple(range(-self._goal_ndim, 0)))
+            return bool(done) if done.ndim == 0 else done
         diff = (np.asarray(achieved_goal, np.float64) - np.asarray(desired_goal, np.float64)) * self.scenario.size_arr
         done = np.linalg.norm(diff, axis=-1) <= self.goal_threshold
         return bool(done) if done.ndim == 0 else done
 
     def compute_truncated(self, achieved_goal, desired_goal, info) -> np.ndarray:
         """Truncation is decided by the time limit alone: ``False`` everywhere."""
-        shape = np.asarray(achieved_goal).shape[:-1]
+        a = np.asarray(achieved_goal)
+        shape = a.shape[: a.ndim - self._goal_ndim]
         return False if shape == () else np.zeros(shape, dtype=bool)
 
     # ----------------------------------------------------------------- rendering

@@ -224,12 +224,20 @@ _add(GridMap(
 ))
 
 
-def get_map(name: str) -> GridMap:
-    """Return the map called ``name``; raise ``KeyError`` listing the known names otherwise."""
-    try:
+from .apartments import APARTMENTS, Apartment  # noqa: E402  (furnished layouts in metres)
+
+
+def get_map(name: str):
+    """Return the 2D map (:data:`MAPS`) or furnished apartment (:data:`APARTMENTS`) called ``name``.
+
+    Raises ``KeyError`` listing the known names otherwise.
+    """
+    if name in MAPS:
         return MAPS[name]
-    except KeyError:
-        raise KeyError(f"unknown map {name!r}; known maps: {', '.join(sorted(MAPS))}") from None
+    if name in APARTMENTS:
+        return APARTMENTS[name]
+    known = ", ".join(sorted(MAPS) + sorted(APARTMENTS))
+    raise KeyError(f"unknown map {name!r}; known maps: {known}")
 
 
-__all__ = ["Box", "GridMap", "MAPS", "get_map"]
+__all__ = ["APARTMENTS", "Apartment", "Box", "GridMap", "MAPS", "get_map"]
