@@ -222,7 +222,11 @@ class World:
             pairs = np.array(list(self._recent), dtype=np.intp)
             d = pos[pairs[:, 0]] - pos[pairs[:, 1]]
             worst = 2.0 * r - float(np.sqrt((d * d).sum(-1)).min())
-        p = pos[np.unique(np.array(list(self._contacts), dtype=np.intp))]
+        touched = np.zeros(len(self.bodies), dtype=bool)
+        touched[np.array(list(self._contacts), dtype=np.intp).ravel()] = True
+        p = pos[touched & ~self.parked]  # parked agents cannot be pushed out of anything
+        if len(p) == 0:
+            return worst
         gap = np.maximum(np.maximum(self._wall_lo[None] - p[:, None], p[:, None] - self._wall_hi[None]), 0.0)
         return max(worst, r - float(np.sqrt((gap * gap).sum(-1)).min()))
 

@@ -94,7 +94,7 @@ def test_factories_accept_ids_and_inherit_the_map():
         ({"min_separation": 0.5}, "min_separation"),
         ({"collision_cost": -1.0}, "collision_cost"),
         ({"observe_neighbors": -1}, "observe_neighbors"),
-        ({"obs_type": "panorama"}, "obs_type"),
+        ({"obs_type": "lidar"}, "obs_type"),
         ({"render_mode": "ansi"}, "render_mode"),
     ]:
         with pytest.raises(ValueError, match=match):
