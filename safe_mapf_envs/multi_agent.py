@@ -32,6 +32,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from .registration import env_spec
 from .rendering import HumanWindow, TopDownRenderer
 from .scenario import NavigationScenario
+from .sensors import PanoramaSensor, scene_for_layout
 from .single_agent import check_action
 from .world import World
 
@@ -90,6 +91,12 @@ class SafeMultiNavigationEnv(ParallelEnv):
     Subclasses provide other observation types (``obs_type``) by overriding
     :meth:`_make_observation_space` and :meth:`_observe`.
 
+    With ``obs_type="panorama"`` (the ``SafeApartment*`` ids) ``observation``,
+    ``achieved_goal`` and ``desired_goal`` are ``uint8`` RGB-D panoramas ``(4, S, S, 4)`` as
+    in the single-agent env: the agent's own view, in which the other agents (parked ones
+    included) stand as cylinders in their top-down colours, and the view from its goal,
+    rendered once per episode without agents.
+
     ## Rewards
     ``-1`` per step for every agent that acted (Search on the Replay Buffer convention).
 
@@ -142,7 +149,9 @@ class SafeMultiNavigationEnv(ParallelEnv):
       ``2 * agent_radius``;
     - ``collision_cost`` (0.0): cost added per contact with another agent;
     - ``observe_neighbors`` (0): adds the ``neighbors`` key with this many nearest agents;
-    - ``obs_type`` ("vector"): the observation type (see :attr:`obs_types`).
+    - ``obs_type`` ("vector" or "panorama"): the observation type (see :attr:`obs_types`);
+    - ``action_scale`` (1.0): world units per unit of action; ``sensor_kwargs`` (None): camera
+      settings for panoramas (see :class:`~safe_mapf_envs.sensors.PanoramaSensor`).
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, every agent
     in its own colour with its goal and trail, parked agents ringed, collision markers and
@@ -160,7 +169,7 @@ class SafeMultiNavigationEnv(ParallelEnv):
         "render_fps": 10,
     }
     #: Observation types this class builds; subclasses extend it with their own.
-    obs_types: Tuple[str, ...] = ("vector",)
+    obs_types: Tuple[str, ...] = ("vector", "panorama")
 
     def __init__(
         self,
@@ -182,6 +191,8 @@ class SafeMultiNavigationEnv(ParallelEnv):
         min_separation: Optional[float] = None,
         collision_cost: float = 0.0,
         observe_neighbors: int = 0,
+        action_scale: float = 1.0,
+        sensor_kwargs: Optional[Dict[str, Any]] = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
@@ -197,6 +208,8 @@ class SafeMultiNavigationEnv(ParallelEnv):
             raise ValueError(f"goal_threshold must be > 0, got {goal_threshold!r}")
         if not np.isfinite(collision_cost) or collision_cost < 0:
             raise ValueError(f"collision_cost must be >= 0, got {collision_cost!r}")
+        if not np.isfinite(action_scale) or action_scale <= 0:
+            raise ValueError(f"action_scale must be a positive number, got {action_scale!r}")
         self.scenario = NavigationScenario(
             layout, agent_radius=agent_radius, cost_radius=cost_radius, cost_fn=cost_fn, boundary_cost=boundary_cost
         )
@@ -219,6 +232,11 @@ class SafeMultiNavigationEnv(ParallelEnv):
         self.collision_cost = float(collision_cost)
         self.metadata = {**type(self).metadata, "name": f"{_snake(self.scenario.layout.name)}_v0"}
         self._inv_size = 1.0 / self.scenario.size_arr
+        self.action_scale = float(action_scale)
+        self.sensor: Optional[PanoramaSensor] = None
+        if obs_type == "panorama":
+            self.sensor = PanoramaSensor(scene_for_layout(self.scenario.layout), **(sensor_kwargs or {}))
+        self._goal_images = np.zeros((n_agents, 0), dtype=np.uint8)
 
         self.possible_agents: List[str] = [f"agent_{i}" for i in range(n_agents)]
         self.agent_name_mapping: Dict[str, int] = {a: i for i, a in enumerate(self.possible_agents)}
@@ -252,7 +270,10 @@ class SafeMultiNavigationEnv(ParallelEnv):
 
     def _make_observation_space(self) -> spaces.Dict:
         """One agent's observation space; override together with :meth:`_observe`."""
-        pos = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
+        if self.sensor is not None:
+            pos = spaces.Box(0, 255, shape=self.sensor.shape, dtype=np.uint8)
+        else:
+            pos = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
         keys: Dict[str, spaces.Space] = {"observation": pos, "achieved_goal": pos, "desired_goal": pos}
         if self.observe_neighbors:
             keys["neighbors"] = spaces.Box(-1.0, 1.0, shape=(self.observe_neighbors, 2), dtype=np.float32)
@@ -423,11 +444,15 @@ class SafeMultiNavigationEnv(ParallelEnv):
         ``self._goals`` (world units, all agents).
         """
         n = len(idx)
-        buf = np.empty((n, 3, 2), dtype=np.float32)
         pos = self._pos[idx]
-        buf[:, 0] = pos * self._inv_size
-        buf[:, 1] = buf[:, 0]
-        buf[:, 2] = self._goals_norm[idx]
+        if self.sensor is not None:  # each agent's view, with the other agents in it
+            img = self.sensor.render(pos, agents=self._pos, agent_radius=self.scenario.agent_radius, self_index=idx)
+            buf = np.stack([img, img, self._goal_images[idx]], axis=1)
+        else:
+            buf = np.empty((n, 3, 2), dtype=np.float32)
+            buf[:, 0] = pos * self._inv_size
+            buf[:, 1] = buf[:, 0]
+            buf[:, 2] = self._goals_norm[idx]
         names = [self.possible_agents[i] for i in idx.tolist()]
         if not self.observe_neighbors:
             return {
@@ -501,6 +526,8 @@ class SafeMultiNavigationEnv(ParallelEnv):
         self._pos = starts.copy()
         self._goals = goals
         self._goals_norm = self.normalize(goals)
+        if self.sensor is not None:
+            self._goal_images = self.sensor.render(goals)
         self._live = np.ones(n, dtype=bool)
         self._live_idx = np.arange(n)
         self._t = 0
@@ -552,7 +579,7 @@ class SafeMultiNavigationEnv(ParallelEnv):
         idx = self._live_idx
         n = self.n_agents
         disp = np.zeros((n, 2))
-        disp[idx] = a
+        disp[idx] = a * self.action_scale
         trace, contacts = self._world.step(disp)
         self._pos = trace[-1]
         obstacle_cost = self.scenario.field.cost(trace[:, idx]).max(axis=0)

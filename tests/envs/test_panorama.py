@@ -295,3 +295,44 @@ def test_panoramas_on_2d_maps_and_bad_arguments():
     vec, _ = gym.make("SafeMaze-v0").reset(seed=0)
     assert vec["observation"].shape == (2,)
     assert isinstance(safe_mapf_envs.get_map("Apartment0"), safe_mapf_envs.Apartment)
+
+
+# --------------------------------------------------------------------------- multi-agent
+VISUAL_MULTI_IDS = ["SafeApartment0-v0", "SafeApartment3-v0", "SafeCentralObstacleVisual-v0"]
+
+
+@pytest.mark.parametrize("env_id", VISUAL_MULTI_IDS)
+def test_pettingzoo_api_on_visual_multi_agent_envs(env_id):
+    from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+
+    parallel_api_test(safe_mapf_envs.parallel_env(env_id, n_agents=3, max_cycles=15), num_cycles=30)
+    parallel_seed_test(lambda: safe_mapf_envs.parallel_env(env_id, n_agents=3, max_cycles=15), num_cycles=10)
+    api_test(safe_mapf_envs.env(env_id, n_agents=3, max_cycles=15), num_cycles=20)
+    par = safe_mapf_envs.parallel_env(env_id, n_agents=3)
+    obs, _ = par.reset(seed=0)
+    for agent in par.agents:
+        assert par.observation_space(agent).contains(obs[agent])
+        assert obs[agent]["observation"].shape == (4, 32, 32, 4)
+
+
+def test_multi_agent_panoramas_show_the_other_agents():
+    par = safe_mapf_envs.parallel_env("SafeApartment0-v0", n_agents=3)
+    starts = [(5.0, 4.0), (5.0, 3.0), (2.0, 4.0)]  # agent_1 one metre north of agent_0
+    goals = [(9.0, 3.6), (5.0, 7.5), (6.0, 8.0)]
+    obs, _ = par.reset(seed=0, options={"starts": starts, "goals": goals})
+    sensor = par.sensor
+    a0 = obs["agent_0"]["observation"]
+    assert np.array_equal(a0, sensor.render(np.array(starts[0]), agents=np.array(starts), agent_radius=0.2,
+                                            self_index=[0]))
+    alone = sensor.render(np.array(starts[0]))
+    d = depth_m(a0[0], sensor)
+    assert not np.array_equal(a0[0], alone[0])  # agent_1 in the north view
+    assert d[22:26, 15:17].min() == pytest.approx(0.8, abs=0.05)
+    assert np.array_equal(a0[2], alone[2])  # nobody to the south
+    # goals are the static views from the goals; the agents see images only
+    for i, g in enumerate(goals):
+        assert np.array_equal(obs[f"agent_{i}"]["desired_goal"], sensor.render(np.array(g)))
+    acts = {a: np.array([0.0, 1.0], np.float32) for a in par.agents}
+    obs2, _, _, _, infos = par.step(acts)
+    assert infos["agent_2"]["position"] == pytest.approx([2.0, 4.25], abs=1e-6)  # action_scale 0.25 m
+    assert par.observation_space("agent_2").contains(obs2["agent_2"])
