@@ -1,0 +1,96 @@
+"""The waypoint controller on the PettingZoo env, with a stand-in policy and stand-in distances."""
+import numpy as np
+import pytest
+
+import safe_mapf_envs
+from agents.search.controller import AgentPlan, WaypointController
+
+SIZE = 55.0
+
+
+def straight_policy(obs, goal):
+    """Head straight for the goal at full speed (a stand-in for the learned policy)."""
+    return np.clip((goal - obs) * SIZE, -1.0, 1.0)
+
+
+def euclid_steps(obs, goal):
+    """Stand-in for the critic: Euclidean distance in world units."""
+    return np.linalg.norm((np.asarray(goal) - np.asarray(obs)) * SIZE, axis=-1)
+
+
+def run(env, ctrl, limit=300):
+    obs, infos = env.reset(options=env._pinned)
+    trail = {a: [infos[a]["position"]] for a in env.agents}
+    while env.agents and ctrl.t < limit:
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        obs, _, _, _, infos = env.step(actions)
+        for a in infos:
+            trail[a].append(infos[a]["position"])
+    return {a: np.array(t) for a, t in trail.items()}
+
+
+def make_env(starts, goals):
+    env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=len(starts))
+    env._pinned = {"starts": starts, "goals": goals}
+    return env
+
+
+def test_agent_visits_its_waypoints_around_the_block():
+    env = make_env([(5.0, 27.5)], [(50.0, 27.5)])
+    wps = np.array([[10.0, 10.0], [45.0, 10.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(wps, np.array([50, 27.5], np.float32) / SIZE)},
+                              reach_threshold=1.0)
+    trail = run(env, ctrl)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [50, 27.5]) <= 1.0
+    for w in wps * SIZE:  # it passed close to each waypoint, so it went around the block
+        assert np.min(np.linalg.norm(trail - w, axis=1)) <= 1.0 + 1e-6
+    assert trail[:, 1].min() < 12.0
+
+
+def test_agent_waits_for_its_planned_departure_time():
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    wp = np.array([[10.0, 5.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[30])},
+                              reach_threshold=1.0, safety_radius=None)
+    trail = run(env, ctrl)["agent_0"]
+    at_wp = np.linalg.norm(trail - [10, 5], axis=1) < 1.0
+    left = np.flatnonzero(at_wp)[-1]
+    assert left >= 30 and ctrl.stats.waits > 0
+    assert len(trail) - 1 < 50  # then it goes on and arrives
+
+
+def test_lower_priority_agent_yields_in_a_head_on_encounter():
+    env = make_env([(5.0, 45.0), (30.0, 45.0)], [(30.0, 45.5), (5.0, 44.5)])
+    goals = np.array([[30, 45.5], [5, 44.5]], np.float32) / SIZE
+    plans = {f"agent_{i}": AgentPlan(np.zeros((0, 2), np.float32), goals[i]) for i in range(2)}
+    ctrl = WaypointController(straight_policy, euclid_steps, plans, safety_radius=3.0)
+    trails = run(env, ctrl, limit=60)
+    d = np.linalg.norm(trails["agent_0"][: len(trails["agent_1"])] - trails["agent_1"][: len(trails["agent_0"])], axis=1)
+    assert ctrl.stats.yields > 0
+    # agent_1 held still while agent_0 was near (it has the lower priority on a tie)
+    held = np.linalg.norm(np.diff(trails["agent_1"], axis=0), axis=1) < 1e-6
+    assert held.any()
+    assert d.min() > 0.0
+
+
+def test_replan_is_called_when_an_agent_falls_behind():
+    env = make_env([(5.0, 5.0)], [(50.0, 5.0)])
+    calls = []
+
+    def replan(agent, obs, plan):
+        calls.append(agent)
+        return AgentPlan(np.zeros((0, 2), np.float32), plan.goal)
+
+    wp = np.array([[10.0, 5.0]], np.float32) / SIZE
+    stuck = lambda o, g: np.zeros((len(o), 2), np.float32)  # noqa: E731  never moves
+    ctrl = WaypointController(stuck, euclid_steps,
+                              {"agent_0": AgentPlan(wp, np.array([50, 5], np.float32) / SIZE, depart_times=[0])},
+                              replan=replan, replan_lag=5, safety_radius=None)
+    ctrl.index["agent_0"] = 1  # pretend it left the waypoint at time 0 but makes no progress
+    env.reset(options=env._pinned)
+    obs = {"agent_0": env.normalize(np.array([5.0, 5.0]))}
+    for _ in range(10):
+        ctrl.act(obs)
+    assert calls == ["agent_0"] and ctrl.stats.replans == 1
