@@ -11,12 +11,15 @@ rows from ``v = -camera_height / t_in`` (where the box meets the floor) up to it
 ``top = max((h - camera_height) / t_in, (h - camera_height) / t_out)`` (front face, or the far
 edge of its top face when it is lower than the camera). A row ``v`` shows the first box whose
 running maximum of ``top`` reaches ``v``, provided the row is not below where that box meets
-the floor (then the floor in front of it shows); rows above every box show the ceiling. So per
-column one ``searchsorted`` of the running maxima over the rows finds every pixel's surface.
+the floor (then the floor in front of it shows); rows above every box show the ceiling. One
+``searchsorted`` turns the running maxima into row counts, and a histogram of those counts,
+accumulated down the rows, gives every pixel its box.
 
 All agents, views, columns and boxes are processed together with no Python loop over agents,
-rays or boxes. Only boxes in front of the nearest wall of a column can be seen, so after the
-2D slab intersection each column keeps just those candidates (typically 2 to 8).
+rays or boxes. Walls are full height, so only the nearest wall of a column and the lower boxes
+in front of it can be seen: after the 2D slab intersection each column keeps just those
+candidates (typically 2 to 8). Colours come from a per-material table of ready-made texture
+variants; depth is planar.
 """
 from __future__ import annotations
 
@@ -34,6 +37,26 @@ _RIGHT = np.array([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)])
 #: Direction the light comes from (for face shading), in world (x, y).
 _LIGHT = np.array([0.6, -0.8])
 _INF = np.float32(np.inf)
+
+
+def _settle_allocator() -> None:
+    """Let the C allocator keep render temporaries on the heap.
+
+    glibc serves blocks above a dynamic threshold (initially 128 KiB) with fresh ``mmap``
+    pages, so each of the few dozen numpy temporaries of a batched render (hundreds of KiB)
+    would cost new page faults, more time than the rendering itself. Freeing one larger
+    mapped block raises that threshold for the rest of the process (glibc's documented
+    dynamic behaviour, which any process that once freed a big array already has), after
+    which the temporaries are reused from the heap. Elsewhere this does nothing.
+    """
+    global _ALLOCATOR_SETTLED
+    if not _ALLOCATOR_SETTLED:
+        block = np.empty(8 << 20, dtype=np.uint8)  # 8 MiB
+        del block
+        _ALLOCATOR_SETTLED = True
+
+
+_ALLOCATOR_SETTLED = False
 
 
 def _agent_materials(i: int) -> Tuple[Material, Material]:
@@ -56,6 +79,8 @@ class PanoramaSensor:
     :meth:`render` returns ``uint8`` arrays of shape ``(N, 4, image_size, image_size, 4)``:
     per agent the views north, east, south, west; per view rows top to bottom and columns
     left to right; channels R, G, B, depth. Depth is planar (distance along the view axis).
+    Surfaces are shaded by the direction they face and dimmed with distance (to 55% at
+    ``max_range``), so the colour channels carry some depth too.
     """
 
     def __init__(
@@ -78,6 +103,7 @@ class PanoramaSensor:
         rng = scene.max_range if max_range is None else float(max_range)
         if not np.isfinite(rng) or rng <= 0:
             raise ValueError(f"max_range must be a positive number, got {max_range!r}")
+        _settle_allocator()
         self.scene = scene
         self.image_size = n = int(image_size)
         self.fov = float(fov)
@@ -123,15 +149,17 @@ class PanoramaSensor:
         self._agent_mats = [
             [scene.material_id(m) for m in _agent_materials(i)] for i in range(len(PALETTE))
         ]
-        # Every material as 8 ready-made colours: (odd stripe, odd band, skirting) -> RGB, so a
-        # pixel's colour is one table row picked by its parities (see Material).
+        # Every material as 16 ready-made colours, indexed by the bits (top face, odd stripe,
+        # odd band, skirting), so a pixel's colour is one table row (see Material). Tops are lit
+        # a little brighter than sides; no entry exceeds 255.
         m = scene.materials
-        pa = np.array([0, 0, 0, 0, 1, 1, 1, 1], np.float32)
-        pb = np.array([0, 0, 1, 1, 0, 0, 1, 1], np.float32)
-        sk = np.array([0, 1, 0, 1, 0, 1, 0, 1], np.float32)
-        bright = (1.0 - m[:, None, 4] * pa - m[:, None, 6] * pb - m[:, None, 7] * ((pa + pb) % 2)) * (1.0 - 0.45 * sk)
-        palette = (m[:, None, :3] * bright[..., None]).reshape(-1, 3)
+        bits = (np.arange(16)[:, None] >> np.arange(3, -1, -1)[None, :]) & 1  # (16, 4)
+        top, pa, pb, sk = (bits[:, i].astype(np.float32) for i in range(4))
+        bright = (1.0 - m[:, None, 4] * pa - m[:, None, 6] * pb - m[:, None, 7] * ((pa + pb) % 2))
+        bright = bright * (1.0 - 0.45 * sk) * (1.0 + 0.1 * top)
+        palette = np.minimum(m[:, None, :3] * bright[..., None], 255.0).reshape(-1, 3)
         self._palette_cols = [np.ascontiguousarray(palette[:, i], dtype=np.float32) for i in range(3)]
+        self._fog = (1.0 - 0.45 * np.arange(256) / 255.0).astype(np.float32)
         self._inv_stripe = np.ascontiguousarray(m[:, 3])
         self._inv_band = np.ascontiguousarray(m[:, 5])
         self._skirting = np.ascontiguousarray(m[:, 8])
@@ -158,7 +186,8 @@ class PanoramaSensor:
                 scene's ``agent_height``, shape ``(M, 2)``; ``None`` for none.
             agent_radius: radius of those cylinders.
             self_index: for each camera, the index in ``agents`` of the agent carrying it
-                (not drawn in its own view), or -1; default: none excluded.
+                (not drawn in its own view), or -1; default: none. A cylinder that contains
+                the camera is never drawn either.
             agent_colours: colour index (into the top-down palette) of each agent; default
                 ``arange(M)``.
 
@@ -167,11 +196,17 @@ class PanoramaSensor:
         """
         p = np.asarray(positions, dtype=np.float64)
         single = p.shape == (2,)
+        if not single and (p.ndim != 2 or p.shape[1] != 2 or p.shape[0] == 0):
+            raise ValueError(f"positions must have shape (N, 2) with N >= 1, or (2,), got shape {p.shape}")
         p = p.reshape(-1, 2)
-        if p.shape[0] == 0 or p.ndim != 2:
-            raise ValueError(f"positions must have shape (N, 2) with N >= 1, got {np.shape(positions)}")
         if not np.all(np.isfinite(p)):
             raise ValueError(f"positions must be finite, got {positions!r}")
+        if agents is not None:
+            agents = np.asarray(agents, dtype=np.float64)
+            if agents.size and (agents.ndim != 2 or agents.shape[1] != 2 or not np.all(np.isfinite(agents))):
+                raise ValueError(f"agents must be finite positions of shape (M, 2), got shape {agents.shape}")
+            if agents.size and not (np.isfinite(agent_radius) and agent_radius > 0):
+                raise ValueError(f"agent_radius must be a positive number to draw agents, got {agent_radius!r}")
         out = self._render(p.astype(np.float32), agents, agent_radius, self_index, agent_colours)
         return out[0] if single else out
 
@@ -208,11 +243,12 @@ class PanoramaSensor:
             ocy = (a[None, :, 1] - p[:, 1, None])[:, None, :]
             b = ocx * dx[None, :, None] + ocy * dy[None, :, None]       # (N, C, M)
             qa = self._dir_sq[None, :, None]
-            disc = b * b - qa * (ocx * ocx + ocy * ocy - R * R)
+            cc = ocx * ocx + ocy * ocy - R * R                          # < 0: camera inside
+            disc = b * b - qa * cc
             root = np.sqrt(np.maximum(disc, 0))
             ctin = np.maximum((b - root) / qa, np.float32(1e-4))
             ctout = (b + root) / qa
-            chit = (disc > 0) & (ctout > ctin)
+            chit = (disc > 0) & (ctout > ctin) & (cc > 0)       # an agent never sees its own body
             if self_index is not None:
                 si = np.asarray(self_index).reshape(-1)
                 if si.shape != (N,):
@@ -248,8 +284,8 @@ class PanoramaSensor:
         # R[j]: rows strictly above the running top of candidates 0..j; a pixel in row r belongs
         # to the first candidate j with R[j] <= r, i.e. owner(r) = #{j : R[j] > r}
         Rj = np.searchsorted(self._neg_v, -np.maximum.accumulate(top, -1).ravel(), side="left")
-        hist = np.bincount(np.arange(0, NC * (S + 1), S + 1).repeat(K) + Rj, minlength=NC * (S + 1))
-        owner = (K - np.cumsum(hist.reshape(NC, S + 1)[:, :S], 1)).T   # (S, N*C); K: no candidate
+        hist = np.bincount(Rj * NC + np.arange(NC).repeat(K), minlength=(S + 1) * NC)[: S * NC]
+        owner = K - np.cumsum(hist.astype(np.int16).reshape(S, NC), 0, dtype=np.int16)  # (S, N*C); K: none
         pix = np.arange(0, NC * K, K)[None, :] + np.minimum(owner, K - 1)
 
         # ---- per pixel, in order (row, camera, column): depth and surface kind
@@ -282,13 +318,14 @@ class PanoramaSensor:
         k_stripe = (k_s * self._inv_stripe[k_side]).astype(np.int32) & 1
 
         # ---- colours: palette index of every pixel as a side face (floor, ceiling and tops
-        # are overwritten below), then light and fog
-        idx = np.take((k_side * 8 + k_stripe * 4).astype(np.int32), pix)
+        # are overwritten below), times shading and fog; side shading <= 0.96, fog <= 1
+        idx = np.take((k_side * 16 + k_stripe * 4).astype(np.int32), pix)
         idx += (z * np.take(self._inv_band[k_side], pix)).astype(np.int32) & 1
         idx += idx & 1                                       # band parity weighs 2 in the palette
         idx += z < np.take(self._skirting[k_side], pix)
-        light = np.where(front, np.take(k_shade, pix), np.float32(1.1))
-        light *= 1.0 - 0.45 * np.minimum(d * np.float32(1.0 / self.max_range), 1.0)
+        light = np.take(k_shade, pix)
+        depth8 = np.minimum(d * np.float32(255.0 / self.max_range) + 0.5, 255.0).astype(np.uint8)
+        fog = np.take(self._fog, depth8)                     # 1 near, 0.55 at the sensor range
         ox = np.repeat(p[:, 0], C)
         oy = np.repeat(p[:, 1], C)
         cdx = np.tile(dx, N)
@@ -300,9 +337,11 @@ class PanoramaSensor:
             tx = ox[tc] + td * cdx[tc]
             ty = oy[tc] + td * cdy[tc]
             tm = np.take(top_mat[sel], pix.reshape(-1)[ti])
-            idx.reshape(-1)[ti] = (tm * 8 + ((tx * self._inv_stripe[tm]).astype(np.int32) & 1) * 4
+            idx.reshape(-1)[ti] = (tm * 16 + 8 + ((tx * self._inv_stripe[tm]).astype(np.int32) & 1) * 4
                                    + ((ty * self._inv_band[tm]).astype(np.int32) & 1) * 2)
-        out = np.empty((4, S, NC), dtype=np.float32)         # planar R, G, B, depth
+            light.reshape(-1)[ti] = 1.0
+        light *= fog
+        out = np.empty((3, S, NC), dtype=np.float32)         # planar R, G, B
         for ch in range(3):
             np.multiply(np.take(self._palette_cols[ch], idx), light, out=out[ch])
 
@@ -312,20 +351,19 @@ class PanoramaSensor:
         fi = np.flatnonzero(bg[h:])
         fc = fi % NC
         fd = d[h:].reshape(-1)[fi]
-        fog = 1.0 - 0.45 * np.minimum(fd * np.float32(1.0 / self.max_range), 1.0)
-        fcol = sc.floor_colour(ox[fc] + fd * cdx[fc], oy[fc] + fd * cdy[fc]) * fog[:, None]
+        fcol = sc.floor_colour(ox[fc] + fd * cdx[fc], oy[fc] + fd * cdy[fc]) * fog[h:].reshape(-1)[fi, None]
         ki = np.flatnonzero(bg[:h])
-        fog = 1.0 - 0.45 * np.minimum(d[:h].reshape(-1)[ki] * np.float32(1.0 / self.max_range), 1.0)
+        ceil_fog = fog[:h].reshape(-1)[ki]
         for ch in range(3):
             out[ch, h:].reshape(-1)[fi] = fcol[:, ch]
-            out[ch, :h].reshape(-1)[ki] = sc.ceiling_colour[ch] * fog
+            out[ch, :h].reshape(-1)[ki] = sc.ceiling_colour[ch] * ceil_fog
 
-        out[3] = d * np.float32(255.0 / self.max_range)
-        out += 0.5
-        np.minimum(out, 255.0, out=out)
-        img = out.astype(np.uint8).reshape(4, S, N, 4, S)
-        # (channel, row, N, view, col) -> (N, view, row, col, channel)
-        return np.ascontiguousarray(img.transpose(2, 3, 1, 4, 0))
+        rgb8 = out[:3].astype(np.uint8)                      # colours are <= 255: truncate
+        img = np.empty((N, 4, S, S, 4), dtype=np.uint8)
+        for ch, plane in enumerate((rgb8[0], rgb8[1], rgb8[2], depth8)):
+            # (row, N, view, col) -> (N, view, row, col)
+            img[..., ch] = plane.reshape(S, N, 4, S).transpose(1, 2, 0, 3)
+        return img
 
 
 def render_panoramas(

@@ -183,6 +183,10 @@ def test_sensor_rejects_bad_arguments():
     sensor = PanoramaSensor(scene)
     with pytest.raises(ValueError, match="finite"):
         sensor.render(np.array([np.nan, 1.0]))
+    with pytest.raises(ValueError, match="shape"):
+        sensor.render(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="agent_radius"):
+        sensor.render(np.array([5.0, 5.0]), agents=np.array([[4.0, 4.0]]))
     with pytest.raises(ValueError, match="self_index"):
         sensor.render(np.zeros((2, 2)) + 5, agents=np.zeros((1, 2)), agent_radius=0.2, self_index=[0])
     with pytest.raises(ValueError, match="camera_height"):
