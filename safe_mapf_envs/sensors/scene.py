@@ -110,9 +110,8 @@ class Scene:
     Args:
         size: world extent ``(width, height)``.
         boxes: the obstacles; the four outer boundary walls are added automatically.
-        rooms: floor regions; the first room containing a point decides its floor and wall
-            materials (later rooms are drawn over earlier ones); uncovered floor uses
-            ``default_room``.
+        rooms: floor regions with their floor and wall materials; where rooms overlap the
+            later one wins, and floor outside every room belongs to ``default_room``.
         default_room: materials of floor not covered by ``rooms`` (its box is ignored).
         ceiling_height: height of the ceiling and of walls.
         camera_height: default eye height of the sensor (below the ceiling).
@@ -270,8 +269,8 @@ class Scene:
             tex = _texture(mat, gx[i0:i1, j0:j1], gy[i0:i1, j0:j1])
             col = mat[:3] * tex[..., None]
             img[i0:i1, j0:j1] = col
-            # a dark outline so neighbouring pieces stay distinct
-            edge = max(1, int(round(0.03 * ppu * max(w, h) / 12.0)))
+            # a dark outline (3 cm) so neighbouring pieces stay distinct
+            edge = max(1, int(round(0.03 * ppu)))
             img[i0:i0 + edge, j0:j1] *= 0.55
             img[i1 - edge:i1, j0:j1] *= 0.55
             img[i0:i1, j0:j0 + edge] *= 0.55
