@@ -1,0 +1,47 @@
+"""Goal-conditioned safe agents (learning) and search on the replay buffer (planning).
+
+Learning (this package's top level):
+
+- :class:`SafeGoalTD3`: the Stable-Baselines3 algorithm (distance and cost critics, Lagrangian
+  fine-tuning, self-sampling), with ``distance``, ``cost``, ``pairwise_distance`` and
+  ``pairwise_cost`` for planners;
+- :func:`load_pretrained`: the checkpoints shipped with the package.
+
+Names are imported lazily, so ``import agents.search`` does not pull in torch.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "SafeGoalTD3": "agents.algorithm",
+    "CheckpointError": "agents.algorithm",
+    "SafeGoalPolicy": "agents.policies",
+    "GoalCostReplayBuffer": "agents.buffers",
+    "LagrangeMultiplier": "agents.lagrangian",
+    "SelfSampler": "agents.self_sampling",
+    "OracleSampler": "agents.self_sampling",
+    "UniformSampler": "agents.self_sampling",
+    "ProblemResetWrapper": "agents.self_sampling",
+    "load_pretrained": "agents.pretrained",
+    "pretrained_path": "agents.pretrained",
+    "evaluate_agent": "agents.evaluation",
+    "TrainConfig": "agents.training",
+    "train_stage": "agents.training",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'agents' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list:
+    return sorted(set(globals()) | set(__all__))

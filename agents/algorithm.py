@@ -1,0 +1,510 @@
+"""``SafeGoalTD3``: goal-conditioned safe actor-critic on Stable-Baselines3.
+
+The learning half of the paper "Safe Multi-Agent Navigation guided by Goal-Conditioned Safe
+Reinforcement Learning", built on Search on the Replay Buffer (SoRB):
+
+- a deterministic goal-conditioned actor trained TD3-style (target policy smoothing, delayed
+  Polyak-averaged targets);
+- an ensemble of **distributional distance critics**: reward -1 per step and no discount, so
+  the return counts steps; each critic predicts a categorical distribution over ``1..K`` steps
+  and learns by cross-entropy against the next state's distribution shifted one bin
+  (:func:`~agents.distributional.shift_distance_target`);
+- an ensemble of **categorical cost critics** over ``[0, cost_max]`` learning the expected
+  cumulative cost to the goal with the C51 projection (costs from ``info["cost"]``);
+- **Lagrangian fine-tuning** (``constrained=True``): the actor minimises
+  ``(distance + lambda * cost) / (1 + lambda)`` and ``lambda >= 0`` rises while episodes cost
+  more than ``cost_limit``;
+- **training problems** chosen by a :mod:`~agents.self_sampling` sampler: the paper's
+  self-sampling by default, SoRB's oracle band or uniform sampling for comparison.
+
+``distance``/``cost`` evaluate the critics for observation-goal pairs and
+``pairwise_distance``/``pairwise_cost`` build the ``N x M`` matrices a planner needs.
+"""
+from __future__ import annotations
+
+import io
+import pathlib
+import warnings
+import zipfile
+from collections import deque
+from typing import Any, ClassVar, Dict, List, Optional, Tuple, Type, TypeVar, Union
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, ProgressBarCallback
+from stable_baselines3.common.noise import ActionNoise
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import load_from_zip_file
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import FloatSchedule, polyak_update, safe_mean, update_learning_rate
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+
+import safe_mapf_envs  # noqa: F401  (registers the environment ids)
+
+from .buffers import GoalCostReplayBuffer, check_goal_space
+from .distributional import categorical_projection, shift_distance_target
+from .lagrangian import LagrangeMultiplier
+from .policies import AGGREGATES, SafeGoalPolicy, _aggregate
+from .self_sampling import ProblemResetWrapper, ProblemSampler, UniformSampler, find_wrappers, make_sampler
+
+SelfSafeGoalTD3 = TypeVar("SelfSafeGoalTD3", bound="SafeGoalTD3")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be loaded: corrupt, truncated, incomplete or for another setup."""
+
+
+class TqdmProgressBar(BaseCallback):
+    """A plain ``tqdm`` progress bar over the environment steps of one ``learn`` call.
+
+    Stable-Baselines3's own bar needs ``rich``; this one only needs ``tqdm``.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.pbar = None
+
+    def _on_training_start(self) -> None:
+        from tqdm.auto import tqdm
+
+        self.pbar = tqdm(total=self.locals["total_timesteps"] - self.model.num_timesteps, unit="step",
+                         dynamic_ncols=True, mininterval=1.0)
+
+    def _on_step(self) -> bool:
+        self.pbar.update(self.training_env.num_envs)
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.pbar is not None:
+            self.pbar.close()
+
+
+def _rich_available() -> bool:
+    try:
+        import rich  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class SafeGoalTD3(OffPolicyAlgorithm):
+    """Goal-conditioned safe TD3 with distributional distance and cost critics.
+
+    Args:
+        policy: ``"MultiInputPolicy"`` or a :class:`~agents.policies.SafeGoalPolicy` subclass.
+        env: a goal-conditioned environment (registered id, ``gym.Env`` or ``VecEnv``). Gym
+            environments are wrapped in a :class:`~agents.self_sampling.ProblemResetWrapper`
+            so the problem sampler can choose each episode's start and goal.
+        learning_rate: critic learning rate (number or schedule).
+        buffer_size: replay capacity.
+        learning_starts: random-action steps before learning.
+        batch_size: minibatch size.
+        tau: Polyak coefficient of the target networks.
+        train_freq / gradient_steps: as in SB3.
+        action_noise: exploration noise added to the actor's actions.
+        replay_buffer_class: default :class:`~agents.buffers.GoalCostReplayBuffer`.
+        replay_buffer_kwargs: e.g. ``her_ratio``, ``random_goal_ratio``.
+        actor_learning_rate: actor learning rate (default: ``learning_rate``).
+        cost_learning_rate: cost-critic learning rate (default: ``learning_rate``).
+        policy_delay: critic updates per actor update.
+        target_update_interval: gradient steps between target updates.
+        target_policy_noise / target_noise_clip: TD3 target policy smoothing.
+        actor_aggregate: how the actor combines the ensemble (``"mean"`` or ``"max"``).
+        constrained: learn ``lambda`` and penalise cost in the actor loss (fine-tuning stage).
+        cost_limit: the episode-cost limit ``delta``.
+        lagrange_lr: learning rate of ``lambda``.
+        lagrange_init: initial ``lambda``.
+        lagrange_max: optional cap on ``lambda``.
+        lagrange_update_episodes: finished episodes per ``lambda`` update (their mean cost).
+        problem_sampler: ``"self"`` (Algorithm 1), ``"oracle"``, ``"uniform"`` or a
+            :class:`~agents.self_sampling.ProblemSampler`.
+        problem_sampler_kwargs: keyword arguments of a named sampler.
+        env_id: the environment id recorded in checkpoints (default: from ``env``).
+        stats_window_size, tensorboard_log, policy_kwargs, verbose, seed, device: as in SB3.
+
+    The discount is fixed to 1 (distances count steps); the episode's time limit keeps
+    returns finite and the last distance bin absorbs "too far".
+    """
+
+    policy_aliases: ClassVar[Dict[str, Type[BasePolicy]]] = {"MultiInputPolicy": SafeGoalPolicy}
+    policy: SafeGoalPolicy
+    replay_buffer: GoalCostReplayBuffer
+
+    def __init__(
+        self,
+        policy: Union[str, Type[SafeGoalPolicy]],
+        env: Union[GymEnv, str, None],
+        learning_rate: Union[float, Schedule] = 3e-4,
+        buffer_size: int = 100_000,
+        learning_starts: int = 1000,
+        batch_size: int = 256,
+        tau: float = 0.05,
+        train_freq: Union[int, Tuple[int, str]] = 1,
+        gradient_steps: int = 1,
+        action_noise: Optional[ActionNoise] = None,
+        replay_buffer_class: Optional[Type[ReplayBuffer]] = None,
+        replay_buffer_kwargs: Optional[Dict[str, Any]] = None,
+        actor_learning_rate: Optional[Union[float, Schedule]] = None,
+        cost_learning_rate: Optional[Union[float, Schedule]] = None,
+        policy_delay: int = 1,
+        target_update_interval: int = 5,
+        target_policy_noise: float = 0.1,
+        target_noise_clip: float = 0.3,
+        actor_aggregate: str = "mean",
+        constrained: bool = False,
+        cost_limit: float = 10.0,
+        lagrange_lr: float = 0.035,
+        lagrange_init: float = 0.0,
+        lagrange_max: Optional[float] = None,
+        lagrange_update_episodes: int = 10,
+        problem_sampler: Union[str, ProblemSampler, None] = "self",
+        problem_sampler_kwargs: Optional[Dict[str, Any]] = None,
+        env_id: Optional[str] = None,
+        stats_window_size: int = 100,
+        tensorboard_log: Optional[str] = None,
+        policy_kwargs: Optional[Dict[str, Any]] = None,
+        verbose: int = 0,
+        seed: Optional[int] = None,
+        device: Union[th.device, str] = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if env_id is None:
+            env_id = env if isinstance(env, str) else getattr(getattr(env, "spec", None), "id", None)
+        if isinstance(env, str):
+            env = gym.make(env)
+        if tensorboard_log is not None:
+            try:
+                from torch.utils.tensorboard import SummaryWriter  # noqa: F401
+            except ImportError:
+                warnings.warn("tensorboard is not installed: TensorBoard logging is disabled")
+                tensorboard_log = None
+        for name, v in (("policy_delay", policy_delay), ("target_update_interval", target_update_interval),
+                        ("lagrange_update_episodes", lagrange_update_episodes)):
+            if int(v) < 1:
+                raise ValueError(f"{name} must be >= 1, got {v!r}")
+        if actor_aggregate not in ("mean", "max", "min"):
+            raise ValueError(f"actor_aggregate must be 'mean', 'max' or 'min', got {actor_aggregate!r}")
+        super().__init__(
+            policy, env, learning_rate, buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
+            gradient_steps, action_noise=action_noise, replay_buffer_class=replay_buffer_class,
+            replay_buffer_kwargs=replay_buffer_kwargs, optimize_memory_usage=False, policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size, tensorboard_log=tensorboard_log, verbose=verbose, device=device,
+            seed=seed, sde_support=False, supported_action_spaces=(spaces.Box,), support_multi_env=True,
+        )
+        self.env_id = env_id
+        self.actor_learning_rate = actor_learning_rate
+        self.cost_learning_rate = cost_learning_rate
+        self.policy_delay = int(policy_delay)
+        self.target_update_interval = int(target_update_interval)
+        self.target_policy_noise = float(target_policy_noise)
+        self.target_noise_clip = float(target_noise_clip)
+        self.actor_aggregate = actor_aggregate
+        self.constrained = bool(constrained)
+        self.lagrange_update_episodes = int(lagrange_update_episodes)
+        self.lagrangian = LagrangeMultiplier(cost_limit, lagrange_lr, lagrange_init, lagrange_max)
+        self.problem_sampler = problem_sampler
+        self.problem_sampler_kwargs = dict(problem_sampler_kwargs or {})
+        self.ep_cost_buffer: deque = deque(maxlen=stats_window_size)
+        self._pending_episode_costs: List[float] = []
+        self._episode_cost_acc: Optional[np.ndarray] = None
+        self._sampler: Optional[ProblemSampler] = None
+        if _init_setup_model:
+            self._setup_model()
+
+    # ------------------------------------------------------------------ setup
+    @staticmethod
+    def _wrap_env(env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
+        if isinstance(env, gym.Env) and not find_wrappers(env):
+            env = ProblemResetWrapper(env)
+        return BaseAlgorithm._wrap_env(env, verbose, monitor_wrapper)
+
+    def _setup_model(self) -> None:
+        check_goal_space(self.observation_space)
+        if self.replay_buffer_class is None:
+            self.replay_buffer_class = GoalCostReplayBuffer
+        super()._setup_model()
+        if isinstance(self.replay_buffer, GoalCostReplayBuffer):
+            self.replay_buffer.set_env(self.env)
+            self.replay_buffer.seed(self.seed)
+        self._create_aliases()
+        self._sampler = make_sampler(self.problem_sampler, **self.problem_sampler_kwargs)
+        self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate if self.actor_learning_rate is not None
+                                               else self.learning_rate)
+        self.cost_lr_schedule = FloatSchedule(self.cost_learning_rate if self.cost_learning_rate is not None
+                                              else self.learning_rate)
+
+    def _create_aliases(self) -> None:
+        self.actor = self.policy.actor
+        self.actor_target = self.policy.actor_target
+        self.critic = self.policy.critic
+        self.critic_target = self.policy.critic_target
+        self.cost_critic = self.policy.cost_critic
+        self.cost_critic_target = self.policy.cost_critic_target
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        super().set_env(env, force_reset)
+        if isinstance(self.replay_buffer, GoalCostReplayBuffer):
+            self.replay_buffer.set_env(self.env)
+
+    @property
+    def sampler(self) -> Optional[ProblemSampler]:
+        """The problem sampler choosing training episodes."""
+        return self._sampler
+
+    def set_problem_sampler(self, sampler: Union[str, ProblemSampler], **kwargs: Any) -> None:
+        """Replace the problem sampler (e.g. switch between stages)."""
+        self.problem_sampler = sampler
+        self.problem_sampler_kwargs = dict(kwargs)
+        self._sampler = make_sampler(sampler, **kwargs)
+
+    def _attach_sampler(self) -> None:
+        if self.env is None or self._sampler is None:
+            return
+        if not isinstance(self.env, DummyVecEnv):
+            if isinstance(self._sampler, UniformSampler):
+                return
+            raise ValueError(f"the {self._sampler.name!r} problem sampler needs a DummyVecEnv (it runs in this "
+                             f"process), got {type(self.env).__name__}")
+        wrappers = [w for e in self.env.envs for w in find_wrappers(e)]
+        if not wrappers and not isinstance(self._sampler, UniformSampler):
+            raise ValueError("the environment has no ProblemResetWrapper; wrap it with "
+                             "agents.self_sampling.ProblemResetWrapper to use the "
+                             f"{self._sampler.name!r} problem sampler")
+        self._sampler.bind(self)
+        for w in wrappers:
+            w.sampler = self._sampler
+
+    def _setup_learn(self, total_timesteps: int, callback: MaybeCallback = None, reset_num_timesteps: bool = True,
+                     tb_log_name: str = "run", progress_bar: bool = False) -> Tuple[int, BaseCallback]:
+        self._attach_sampler()
+        return super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+
+    def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
+        if isinstance(callback, list):
+            callback = CallbackList(callback)
+        if not isinstance(callback, BaseCallback):
+            callback = ConvertCallback(callback)
+        if progress_bar:
+            bar = ProgressBarCallback() if _rich_available() else TqdmProgressBar()
+            callback = CallbackList([callback, bar])
+        callback.init_callback(self)
+        return callback
+
+    def learn(self: SelfSafeGoalTD3, total_timesteps: int, callback: MaybeCallback = None, log_interval: int = 10,
+              tb_log_name: str = "SafeGoalTD3", reset_num_timesteps: bool = True,
+              progress_bar: bool = False) -> SelfSafeGoalTD3:
+        return super().learn(total_timesteps=total_timesteps, callback=callback, log_interval=log_interval,
+                             tb_log_name=tb_log_name, reset_num_timesteps=reset_num_timesteps,
+                             progress_bar=progress_bar)
+
+    # ------------------------------------------------------------------ costs and lambda
+    def _update_info_buffer(self, infos: List[Dict[str, Any]], dones: Optional[np.ndarray] = None) -> None:
+        super()._update_info_buffer(infos, dones)
+        if dones is None:
+            return
+        if self._episode_cost_acc is None or len(self._episode_cost_acc) != len(infos):
+            self._episode_cost_acc = np.zeros(len(infos))
+        for i, info in enumerate(infos):
+            self._episode_cost_acc[i] += float(info.get("cost", 0.0))
+            if dones[i]:
+                self.ep_cost_buffer.append(float(self._episode_cost_acc[i]))
+                self._pending_episode_costs.append(float(self._episode_cost_acc[i]))
+                self._episode_cost_acc[i] = 0.0
+        if len(self._pending_episode_costs) > 10 * self.lagrange_update_episodes:
+            del self._pending_episode_costs[: -self.lagrange_update_episodes]
+
+    def _maybe_update_lagrangian(self) -> None:
+        if self.constrained and len(self._pending_episode_costs) >= self.lagrange_update_episodes:
+            self.lagrangian.update(self._pending_episode_costs)
+            self._pending_episode_costs = []
+
+    @property
+    def lagrange_multiplier(self) -> float:
+        """The current ``lambda`` (0 throughout the unconstrained stage)."""
+        return self.lagrangian.value
+
+    # ------------------------------------------------------------------ training
+    def train(self, gradient_steps: int, batch_size: int = 256) -> None:
+        if self.replay_buffer.n_complete_transitions() == 0:
+            return  # goals are relabelled within finished episodes only: wait for the first one
+        self.policy.set_training_mode(True)
+        progress = self._current_progress_remaining
+        update_learning_rate(self.critic.optimizer, self.lr_schedule(progress))
+        update_learning_rate(self.cost_critic.optimizer, self.cost_lr_schedule(progress))
+        update_learning_rate(self.actor.optimizer, self.actor_lr_schedule(progress))
+        self._maybe_update_lagrangian()
+        lam = self.lagrangian.value if self.constrained else 0.0
+        d_losses, c_losses, a_losses, pred_d, pred_c = [], [], [], [], []
+        for _ in range(gradient_steps):
+            self._n_updates += 1
+            data = self.replay_buffer.sample(batch_size)
+            obs, next_obs = data.observations, data.next_observations
+            e_d, e_c = self.critic.n_members, self.cost_critic.n_members
+            with th.no_grad():
+                next_actions = self.actor_target(next_obs)
+                if self.target_policy_noise > 0:
+                    noise = th.randn_like(next_actions) * self.target_policy_noise
+                    next_actions = (next_actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)).clamp(-1, 1)
+                dones = data.dones.reshape(1, -1)
+                next_d = th.softmax(self.critic_target(next_obs, next_actions), dim=-1)
+                target_d = shift_distance_target(next_d, dones.expand(e_d, -1))
+                next_c = th.softmax(self.cost_critic_target(next_obs, next_actions), dim=-1)
+                costs = data.costs.reshape(1, -1).expand(e_c, -1)
+                target_c = categorical_projection(next_c, costs, dones.expand(e_c, -1), self.cost_critic.support)
+
+            logits_d = self.critic(obs, data.actions)
+            d_loss = -(target_d * th.log_softmax(logits_d, dim=-1)).sum(-1).mean(-1).sum()
+            self.critic.optimizer.zero_grad()
+            d_loss.backward()
+            self.critic.optimizer.step()
+
+            logits_c = self.cost_critic(obs, data.actions)
+            c_loss = -(target_c * th.log_softmax(logits_c, dim=-1)).sum(-1).mean(-1).sum()
+            self.cost_critic.optimizer.zero_grad()
+            c_loss.backward()
+            self.cost_critic.optimizer.step()
+            d_losses.append(d_loss.item())
+            c_losses.append(c_loss.item())
+
+            if self._n_updates % self.policy_delay == 0:
+                actions = self.actor(obs)
+                with th.no_grad():
+                    feats_d = self.critic.extract_features(obs)
+                dist = _aggregate(self.critic.expected(self.critic.logits_from_features(feats_d, actions)),
+                                  self.actor_aggregate)
+                if lam > 0:
+                    with th.no_grad():
+                        feats_c = self.cost_critic.extract_features(obs)
+                    cost = _aggregate(self.cost_critic.expected(self.cost_critic.logits_from_features(feats_c, actions)),
+                                      self.actor_aggregate)
+                    a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
+                else:
+                    a_loss = dist.mean()
+                self.actor.optimizer.zero_grad()
+                a_loss.backward()
+                self.actor.optimizer.step()
+                a_losses.append(a_loss.item())
+                pred_d.append(dist.mean().item())
+
+            if self._n_updates % self.target_update_interval == 0:
+                polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+                polyak_update(self.cost_critic.parameters(), self.cost_critic_target.parameters(), self.tau)
+                polyak_update(self.actor.parameters(), self.actor_target.parameters(), self.tau)
+
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/distance_critic_loss", float(np.mean(d_losses)))
+        self.logger.record("train/cost_critic_loss", float(np.mean(c_losses)))
+        if a_losses:
+            self.logger.record("train/actor_loss", float(np.mean(a_losses)))
+            self.logger.record("train/predicted_distance", float(np.mean(pred_d)))
+        self.logger.record("train/lambda", self.lagrangian.value)
+
+    def dump_logs(self) -> None:
+        if self.ep_cost_buffer:
+            self.logger.record("rollout/ep_cost_mean", safe_mean(list(self.ep_cost_buffer)))
+        if self._sampler is not None:
+            for k, v in self._sampler.stats.items():
+                self.logger.record(k, v)
+        super().dump_logs()
+
+    # ------------------------------------------------------------------ critics as functions
+    def distance(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max") -> np.ndarray:
+        """Predicted steps from ``obs[i]`` to ``goal[i]`` (expected value of the distance distribution).
+
+        ``obs``/``goal``: raw observations, one (``obs_shape``) or batches ``(N, *obs_shape)``;
+        for the vector environments, positions divided by the world size. ``aggregate``
+        combines the ensemble: ``"max"`` (pessimistic), ``"mean"``, ``"min"`` or ``"none"``
+        (``(E, N)``).
+        """
+        return self.policy.values(obs, goal, ("distance",), aggregate)["distance"]
+
+    def cost(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max") -> np.ndarray:
+        """Predicted cumulative cost from ``obs[i]`` to ``goal[i]`` (same conventions as :meth:`distance`)."""
+        return self.policy.values(obs, goal, ("cost",), aggregate)["cost"]
+
+    def pairwise_distance(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
+                          chunk_size: int = 2048) -> np.ndarray:
+        """``D[i, j]``: predicted steps from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)`` (float32)."""
+        return self.policy.pairwise(obs_a, obs_b, ("distance",), aggregate, chunk_size)["distance"]
+
+    def pairwise_cost(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
+                      chunk_size: int = 2048) -> np.ndarray:
+        """``C[i, j]``: predicted cumulative cost from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)``."""
+        return self.policy.pairwise(obs_a, obs_b, ("cost",), aggregate, chunk_size)["cost"]
+
+    def pairwise(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
+                 chunk_size: int = 2048) -> Tuple[np.ndarray, np.ndarray]:
+        """``(D, C)`` together, sharing the actor's pass over the pairs (cheaper than two calls)."""
+        out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size)
+        return out["distance"], out["cost"]
+
+    # ------------------------------------------------------------------ save / load
+    def _excluded_save_params(self) -> List[str]:
+        excluded = super()._excluded_save_params() + [
+            "actor", "actor_target", "critic", "critic_target", "cost_critic", "cost_critic_target",
+            "_sampler", "_episode_cost_acc", "actor_lr_schedule", "cost_lr_schedule",
+        ]
+        if not isinstance(self.problem_sampler, (str, type(None))):
+            excluded.append("problem_sampler")
+        return excluded
+
+    def _get_torch_save_params(self) -> Tuple[List[str], List[str]]:
+        return ["policy", "actor.optimizer", "critic.optimizer", "cost_critic.optimizer"], []
+
+    @classmethod
+    def load(  # type: ignore[override]
+        cls: Type[SelfSafeGoalTD3],
+        path: Union[str, pathlib.Path, io.BufferedIOBase],
+        env: Optional[GymEnv] = None,
+        device: Union[th.device, str] = "auto",
+        custom_objects: Optional[Dict[str, Any]] = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfSafeGoalTD3:
+        """Load a checkpoint; a corrupt, incomplete or mismatched file raises :class:`CheckpointError`."""
+        name = str(path) if not isinstance(path, io.BufferedIOBase) else "<stream>"
+        if isinstance(path, (str, pathlib.Path)):
+            p = pathlib.Path(path)
+            if not p.exists() and not p.with_suffix(".zip").exists():
+                raise FileNotFoundError(f"no checkpoint at {name}")
+        try:
+            data, params, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects)
+        except (zipfile.BadZipFile, EOFError, OSError) as exc:
+            raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip): {exc}") from exc
+        except Exception as exc:  # unpickling or torch deserialisation errors
+            if "zip-file" in str(exc):  # SB3 reports a bad zip as ValueError
+                raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip)") from exc
+            raise CheckpointError(f"{name}: could not deserialise the checkpoint ({type(exc).__name__}: {exc})") from exc
+        if data is None:
+            raise CheckpointError(f"{name} has no 'data' entry (not an SB3 checkpoint, or incomplete)")
+        missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]
+        if missing:
+            raise CheckpointError(f"{name} is missing the keys {missing} in its 'data' entry")
+        policy_class = data["policy_class"]
+        if not (isinstance(policy_class, type) and issubclass(policy_class, SafeGoalPolicy)):
+            raise CheckpointError(f"{name} holds a {getattr(policy_class, '__name__', policy_class)!r} policy, "
+                                  f"not a SafeGoalPolicy: it was not saved by {cls.__name__}")
+        needed = ["policy", "actor.optimizer", "critic.optimizer", "cost_critic.optimizer"]
+        absent = [k for k in needed if not params or k not in params]
+        if absent:
+            raise CheckpointError(f"{name} is missing the parameter files {[k + '.pth' for k in absent]}")
+        try:
+            model = super().load(path, env=env, device=device, custom_objects=custom_objects,
+                                 print_system_info=print_system_info, force_reset=force_reset, **kwargs)
+        except ValueError as exc:
+            if "spaces do not match" in str(exc) or "do not match" in str(exc):
+                raise CheckpointError(f"{name} does not fit the given environment: {exc}") from exc
+            raise CheckpointError(f"{name}: {exc}") from exc
+        except (RuntimeError, KeyError) as exc:
+            raise CheckpointError(f"{name}: the stored networks do not match the policy architecture "
+                                  f"({type(exc).__name__}: {exc})") from exc
+        return model
+
+
+__all__ = ["CheckpointError", "SafeGoalTD3", "TqdmProgressBar"]

@@ -1,0 +1,575 @@
+"""Networks of the goal-conditioned safe agent: encoders, actor, ensembles of categorical critics.
+
+Layout (after Stable-Baselines3's ``td3/policies.py``): a :class:`GoalActor` and two
+:class:`CategoricalCritic` ensembles (distance and cost), each with its own
+:class:`GoalPairExtractor`, plus target copies, gathered in :class:`SafeGoalPolicy`.
+
+The extractor encodes the ``observation`` and the ``desired_goal`` with the **same** encoder
+(an MLP for vectors, :class:`PanoramaEncoder` for stacks of images) and concatenates the two
+codes. Every head is an MLP whose first layer is linear in ``[code(obs), code(goal), action]``.
+That makes the ``N x M`` matrices a planner needs cheap: the codes of the ``N + M``
+observations and their first-layer products are computed once, and a pair only costs a
+broadcast sum plus the remaining small layers (:meth:`SafeGoalPolicy.pairwise`).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Type
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BaseModel, BasePolicy
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from torch import nn
+
+from .buffers import check_goal_space
+from .distributional import cost_support, distance_support
+
+#: Ways to combine the members of an ensemble: pessimistic (max), mean, optimistic (min), or
+#: ``"none"`` to return every member (ensemble axis first).
+AGGREGATES = ("max", "mean", "min", "none")
+
+
+# --------------------------------------------------------------------------- encoders
+def _is_image_space(space: spaces.Space) -> bool:
+    return isinstance(space, spaces.Box) and len(space.shape) >= 3
+
+
+class MlpEncoder(nn.Module):
+    """An MLP for vector observations: ``obs -> code``."""
+
+    def __init__(self, input_dim: int, net_arch: Sequence[int] = (64, 64),
+                 activation_fn: Type[nn.Module] = nn.ReLU) -> None:
+        super().__init__()
+        if not net_arch:
+            raise ValueError("the MLP encoder needs at least one layer, got net_arch=[]")
+        layers: List[nn.Module] = []
+        last = input_dim
+        for width in net_arch:
+            layers += [nn.Linear(last, int(width)), activation_fn()]
+            last = int(width)
+        self.net = nn.Sequential(*layers)
+        self.output_dim = last
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        return self.net(x.float().flatten(1))
+
+
+class PanoramaEncoder(nn.Module):
+    """The paper's image encoder: ``Conv(16, 8, 4) + Conv(32, 4, 4) + FC(256)``.
+
+    Input: a batch of panoramas of shape ``(B, views, H, W, C)`` (channels last, e.g.
+    ``(4, 32, 32, 4)``: four RGB-D views) or single images ``(B, H, W, C)``. Each view goes
+    through the same convolutions (``(filters, kernel, stride)`` per layer); the flattened
+    views are concatenated and mapped by one fully connected layer. ``uint8`` inputs are
+    scaled to ``[0, 1]``.
+    """
+
+    def __init__(
+        self,
+        obs_shape: Tuple[int, ...],
+        features_dim: int = 256,
+        conv_layers: Sequence[Tuple[int, int, int]] = ((16, 8, 4), (32, 4, 4)),
+        scale: float = 1.0 / 255.0,
+    ) -> None:
+        super().__init__()
+        if len(obs_shape) not in (3, 4):
+            raise ValueError(f"PanoramaEncoder expects (views, H, W, C) or (H, W, C) observations, got shape {obs_shape}")
+        self.obs_shape = tuple(int(s) for s in obs_shape)
+        views, h, w, c = (1, *self.obs_shape) if len(obs_shape) == 3 else self.obs_shape
+        self.views, self.scale = views, float(scale)
+        layers: List[nn.Module] = []
+        in_ch = c
+        for filters, kernel, stride in conv_layers:
+            if kernel > min(h, w):
+                raise ValueError(f"conv kernel {kernel} is larger than the {h}x{w} feature map of a {obs_shape} observation")
+            layers += [nn.Conv2d(in_ch, int(filters), int(kernel), stride=int(stride)), nn.ReLU()]
+            in_ch = int(filters)
+            h, w = (h - kernel) // stride + 1, (w - kernel) // stride + 1
+        self.cnn = nn.Sequential(*layers, nn.Flatten())
+        self.fc = nn.Sequential(nn.Linear(views * in_ch * h * w, int(features_dim)), nn.ReLU())
+        self.output_dim = int(features_dim)
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        b = x.shape[0]
+        x = x.float() * self.scale if x.dtype == th.uint8 else x.float()
+        x = x.reshape(b * self.views, *x.shape[-3:]).permute(0, 3, 1, 2)
+        return self.fc(self.cnn(x).reshape(b, -1))
+
+
+class GoalPairExtractor(BaseFeaturesExtractor):
+    """Encodes ``observation`` and ``desired_goal`` with one shared encoder; returns both codes.
+
+    Args:
+        observation_space: a goal-conditioned ``Dict`` space.
+        encoder: ``"auto"`` (CNN for image observations, MLP otherwise), ``"mlp"`` or ``"cnn"``.
+        net_arch: hidden widths of the MLP encoder.
+        features_dim: code size of the CNN encoder.
+        conv_layers: ``(filters, kernel, stride)`` of the CNN encoder.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        encoder: str = "auto",
+        net_arch: Sequence[int] = (64, 64),
+        features_dim: int = 256,
+        conv_layers: Sequence[Tuple[int, int, int]] = ((16, 8, 4), (32, 4, 4)),
+    ) -> None:
+        check_goal_space(observation_space)
+        obs_space, goal_space = observation_space["observation"], observation_space["desired_goal"]
+        if obs_space.shape != goal_space.shape:
+            raise ValueError("observation and desired_goal must share one encoder, so they need the same shape; got "
+                             f"{obs_space.shape} and {goal_space.shape}")
+        if encoder == "auto":
+            encoder = "cnn" if _is_image_space(obs_space) else "mlp"
+        if encoder == "cnn":
+            net: nn.Module = PanoramaEncoder(obs_space.shape, features_dim=features_dim, conv_layers=conv_layers,
+                                             scale=1.0 / 255.0 if obs_space.dtype == np.uint8 else 1.0)
+        elif encoder == "mlp":
+            net = MlpEncoder(int(np.prod(obs_space.shape)), net_arch)
+        else:
+            raise ValueError(f"encoder must be 'auto', 'mlp' or 'cnn', got {encoder!r}")
+        super().__init__(observation_space, features_dim=2 * net.output_dim)
+        self.encoder = net
+        self.code_dim = net.output_dim
+
+    def encode(self, x: th.Tensor) -> th.Tensor:
+        """Codes of a batch of raw observations (or goals): ``(B, *obs_shape) -> (B, code_dim)``."""
+        return self.encoder(x)
+
+    def forward(self, observations: Dict[str, th.Tensor]) -> th.Tensor:
+        obs, goal = observations["observation"], observations["desired_goal"]
+        codes = self.encoder(th.cat([obs, goal], 0))
+        return th.cat(codes.split([obs.shape[0], goal.shape[0]]), 1)
+
+
+# --------------------------------------------------------------------------- ensemble MLPs
+class EnsembleLinear(nn.Module):
+    """``E`` independent linear layers applied as one batched matmul: ``(E, B, in) -> (E, B, out)``."""
+
+    def __init__(self, n_members: int, in_features: int, out_features: int) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(th.empty(n_members, in_features, out_features))
+        self.bias = nn.Parameter(th.empty(n_members, 1, out_features))
+        bound = 1.0 / math.sqrt(in_features)  # the default initialisation of nn.Linear
+        nn.init.uniform_(self.weight, -bound, bound)
+        nn.init.uniform_(self.bias, -bound, bound)
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        return th.baddbmm(self.bias, x, self.weight)
+
+
+class EnsembleHead(nn.Module):
+    """``E`` MLPs ``in_dim -> hidden... -> out_dim`` evaluated together."""
+
+    def __init__(self, n_members: int, in_dim: int, net_arch: Sequence[int], out_dim: int,
+                 activation_fn: Type[nn.Module] = nn.ReLU) -> None:
+        super().__init__()
+        if n_members < 1:
+            raise ValueError(f"an ensemble needs at least one member, got {n_members}")
+        if not net_arch:
+            raise ValueError("a head needs at least one hidden layer, got net_arch=[]")
+        dims = [in_dim, *[int(w) for w in net_arch], out_dim]
+        self.n_members = n_members
+        self.layers = nn.ModuleList(EnsembleLinear(n_members, dims[i], dims[i + 1]) for i in range(len(dims) - 1))
+        self.act = activation_fn()
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        """``(B, in)`` (shared by every member) or ``(E, B, in)`` -> ``(E, B, out)``."""
+        if x.dim() == 2:
+            x = x.unsqueeze(0).expand(self.n_members, -1, -1)
+        return self.from_first_preactivation(self.layers[0](x))
+
+    def from_first_preactivation(self, h: th.Tensor) -> th.Tensor:
+        """Finish the forward pass from the first layer's pre-activation ``(E, B, hidden0)``."""
+        for layer in self.layers[1:]:
+            h = layer(self.act(h))
+        return h
+
+    def first_layer_parts(self, sizes: Sequence[int]) -> Tuple[List[th.Tensor], th.Tensor]:
+        """The first layer's weight split into row blocks of ``sizes`` (``(E, size, hidden0)`` each) and its bias."""
+        return list(self.layers[0].weight.split(list(sizes), dim=1)), self.layers[0].bias
+
+
+# --------------------------------------------------------------------------- actor / critics
+class GoalActor(BasePolicy):
+    """Deterministic goal-conditioned actor ``pi(obs, goal) -> action in [-1, 1]^A``."""
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, net_arch: Sequence[int],
+                 features_extractor: GoalPairExtractor, features_dim: int,
+                 activation_fn: Type[nn.Module] = nn.ReLU, normalize_images: bool = False) -> None:
+        super().__init__(observation_space, action_space, features_extractor=features_extractor,
+                         normalize_images=normalize_images, squash_output=True)
+        self.net_arch = list(net_arch)
+        self.features_dim = features_dim
+        self.activation_fn = activation_fn
+        self.action_dim = int(np.prod(action_space.shape))
+        self.mu = EnsembleHead(1, features_dim, net_arch, self.action_dim, activation_fn)
+
+    def _get_constructor_parameters(self) -> Dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(dict(net_arch=self.net_arch, features_dim=self.features_dim, activation_fn=self.activation_fn,
+                         features_extractor=self.features_extractor))
+        return data
+
+    def extract_features(self, obs: PyTorchObs, features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
+        return (features_extractor or self.features_extractor)(obs)
+
+    def action_from_features(self, features: th.Tensor) -> th.Tensor:
+        return th.tanh(self.mu(features)[0])
+
+    def forward(self, obs: PyTorchObs) -> th.Tensor:
+        return self.action_from_features(self.extract_features(obs))
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self(observation)
+
+
+class CategoricalCritic(BaseModel):
+    """An ensemble of categorical Q-functions ``Z(obs, action, goal)`` over a fixed support.
+
+    ``forward`` returns logits of shape ``(n_members, B, n_bins)``; :meth:`expected` turns
+    logits into the expected value per member (distance in steps, or cumulative cost).
+    """
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, net_arch: Sequence[int],
+                 features_extractor: GoalPairExtractor, features_dim: int, support: th.Tensor,
+                 n_members: int = 3, activation_fn: Type[nn.Module] = nn.ReLU,
+                 normalize_images: bool = False) -> None:
+        super().__init__(observation_space, action_space, features_extractor=features_extractor,
+                         normalize_images=normalize_images)
+        self.action_dim = int(np.prod(action_space.shape))
+        self.n_members = n_members
+        self.head = EnsembleHead(n_members, features_dim + self.action_dim, net_arch, len(support), activation_fn)
+        self.register_buffer("support", support.clone().float())
+
+    def extract_features(self, obs: PyTorchObs, features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
+        return (features_extractor or self.features_extractor)(obs)
+
+    def logits_from_features(self, features: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        return self.head(th.cat([features, actions], dim=1))
+
+    def forward(self, obs: PyTorchObs, actions: th.Tensor) -> th.Tensor:
+        return self.logits_from_features(self.extract_features(obs), actions)
+
+    def expected(self, logits: th.Tensor) -> th.Tensor:
+        """Expected value of each member's distribution: ``(..., K) -> (...)``."""
+        return th.softmax(logits, dim=-1) @ self.support
+
+
+def _aggregate(values: th.Tensor, aggregate: str) -> th.Tensor:
+    """Combine ensemble members (axis 0)."""
+    if aggregate == "max":
+        return values.max(0).values
+    if aggregate == "mean":
+        return values.mean(0)
+    if aggregate == "min":
+        return values.min(0).values
+    if aggregate == "none":
+        return values
+    raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+
+
+# --------------------------------------------------------------------------- the policy
+class SafeGoalPolicy(BasePolicy):
+    """Actor, distance-critic ensemble and cost-critic ensemble (plus targets) of the safe agent.
+
+    Args:
+        observation_space: goal-conditioned ``Dict`` space (vector or image observations).
+        action_space: ``Box`` actions.
+        lr_schedule: learning-rate schedule (the algorithm sets per-network rates while training).
+        net_arch: hidden widths of the heads: a list for all of them, or a dict with keys
+            ``pi`` (actor), ``qf`` (distance critics) and ``qc`` (cost critics). The first layer of
+            every head sits on ``[code(obs), code(goal), action]``; the pairwise cost of the
+            planner's matrices grows with the square of these widths.
+        activation_fn: activation of the heads.
+        features_extractor_class: extractor of actor and critics (each gets its own instance).
+        features_extractor_kwargs: its keyword arguments.
+        normalize_images: unused (the encoders scale ``uint8`` images themselves); kept for SB3.
+        optimizer_class / optimizer_kwargs: optimiser of each network.
+        n_critics: members of the distance ensemble.
+        n_cost_critics: members of the cost ensemble.
+        n_distance_bins: bins of the distance distribution (bin ``k`` = ``k + 1`` steps); the
+            largest representable distance, use the episode step limit.
+        n_cost_bins: atoms of the cost distribution.
+        cost_max: the largest atom of the cost distribution (the smallest is 0).
+    """
+
+    actor: GoalActor
+    actor_target: GoalActor
+    critic: CategoricalCritic
+    critic_target: CategoricalCritic
+    cost_critic: CategoricalCritic
+    cost_critic_target: CategoricalCritic
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Box,
+        lr_schedule: Schedule,
+        net_arch: Optional[List[int] | Dict[str, List[int]]] = None,
+        activation_fn: Type[nn.Module] = nn.ReLU,
+        features_extractor_class: Type[BaseFeaturesExtractor] = GoalPairExtractor,
+        features_extractor_kwargs: Optional[Dict[str, Any]] = None,
+        normalize_images: bool = False,
+        optimizer_class: Type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: Optional[Dict[str, Any]] = None,
+        n_critics: int = 3,
+        n_cost_critics: int = 3,
+        n_distance_bins: int = 20,
+        n_cost_bins: int = 40,
+        cost_max: float = 40.0,
+    ) -> None:
+        check_goal_space(observation_space)
+        if not isinstance(action_space, spaces.Box):
+            raise ValueError(f"SafeGoalPolicy needs a Box action space, got {action_space!r}")
+        for name, v in (("n_critics", n_critics), ("n_cost_critics", n_cost_critics)):
+            if int(v) < 1:
+                raise ValueError(f"{name} must be >= 1, got {v!r}")
+        super().__init__(observation_space, action_space, features_extractor_class, features_extractor_kwargs,
+                         optimizer_class=optimizer_class, optimizer_kwargs=optimizer_kwargs,
+                         normalize_images=False, squash_output=True)
+        if net_arch is None:
+            net_arch = [128, 128]
+        if isinstance(net_arch, dict):
+            unknown = set(net_arch) - {"pi", "qf", "qc"}
+            if unknown:
+                raise ValueError(f"net_arch keys must be among 'pi', 'qf', 'qc', got {sorted(unknown)}")
+            pi_arch = list(net_arch.get("pi", [128, 128]))
+            qf_arch = list(net_arch.get("qf", [128, 128]))
+            qc_arch = list(net_arch.get("qc", qf_arch))
+        else:
+            pi_arch = qf_arch = qc_arch = list(net_arch)
+        self.net_arch = net_arch
+        self.pi_arch, self.qf_arch, self.qc_arch = pi_arch, qf_arch, qc_arch
+        self.activation_fn = activation_fn
+        self.n_critics = int(n_critics)
+        self.n_cost_critics = int(n_cost_critics)
+        self.n_distance_bins = int(n_distance_bins)
+        self.n_cost_bins = int(n_cost_bins)
+        self.cost_max = float(cost_max)
+        self._distance_support = distance_support(self.n_distance_bins)
+        self._cost_support = cost_support(self.n_cost_bins, self.cost_max)
+        if optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs and "foreach" not in self.optimizer_kwargs:
+            # one fused kernel per step instead of one per parameter tensor (the heads are small)
+            self.optimizer_kwargs = dict(self.optimizer_kwargs, fused=True)
+        self._build(lr_schedule)
+
+    # ------------------------------------------------------------------ construction
+    def _make_actor(self) -> GoalActor:
+        fe = self.make_features_extractor()
+        return GoalActor(self.observation_space, self.action_space, self.pi_arch, fe, fe.features_dim,
+                         self.activation_fn).to(self.device)
+
+    def _make_critic(self, arch: Sequence[int], support: th.Tensor, n_members: int) -> CategoricalCritic:
+        fe = self.make_features_extractor()
+        return CategoricalCritic(self.observation_space, self.action_space, arch, fe, fe.features_dim, support,
+                                 n_members, self.activation_fn).to(self.device)
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        lr = lr_schedule(1)
+        self.actor = self._make_actor()
+        self.actor_target = self._make_actor()
+        self.actor_target.load_state_dict(self.actor.state_dict())
+        self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr, **self.optimizer_kwargs)
+
+        self.critic = self._make_critic(self.qf_arch, self._distance_support, self.n_critics)
+        self.critic_target = self._make_critic(self.qf_arch, self._distance_support, self.n_critics)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr, **self.optimizer_kwargs)
+
+        self.cost_critic = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics)
+        self.cost_critic_target = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics)
+        self.cost_critic_target.load_state_dict(self.cost_critic.state_dict())
+        self.cost_critic.optimizer = self.optimizer_class(self.cost_critic.parameters(), lr=lr, **self.optimizer_kwargs)
+
+        for target in (self.actor_target, self.critic_target, self.cost_critic_target):
+            target.set_training_mode(False)
+
+    def _get_constructor_parameters(self) -> Dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(dict(
+            net_arch=self.net_arch, activation_fn=self.activation_fn,
+            features_extractor_class=self.features_extractor_class,
+            features_extractor_kwargs=self.features_extractor_kwargs,
+            optimizer_class=self.optimizer_class, optimizer_kwargs=self.optimizer_kwargs,
+            n_critics=self.n_critics, n_cost_critics=self.n_cost_critics,
+            n_distance_bins=self.n_distance_bins, n_cost_bins=self.n_cost_bins, cost_max=self.cost_max,
+            lr_schedule=self._dummy_schedule,
+        ))
+        return data
+
+    # ------------------------------------------------------------------ SB3 API
+    def forward(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self._predict(observation, deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self.actor(observation)
+
+    def set_training_mode(self, mode: bool) -> None:
+        self.actor.set_training_mode(mode)
+        self.critic.set_training_mode(mode)
+        self.cost_critic.set_training_mode(mode)
+        self.training = mode
+
+    # ------------------------------------------------------------------ distances and costs
+    def _as_batch(self, x: Any, what: str) -> Tuple[th.Tensor, bool]:
+        """Raw observations (one or a batch) as a tensor with a batch axis; flag: was it a single one."""
+        shape = tuple(self.observation_space["observation"].shape)
+        arr = x.detach().cpu().numpy() if isinstance(x, th.Tensor) else np.asarray(x)
+        if arr.shape == shape:
+            arr, single = arr[None], True
+        elif arr.ndim == len(shape) + 1 and arr.shape[1:] == shape:
+            single = False
+        else:
+            raise ValueError(f"{what} must be one observation of shape {shape} or a batch (N, *{shape}), "
+                             f"got shape {arr.shape}")
+        if arr.dtype != np.uint8:
+            arr = arr.astype(np.float32, copy=False)
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{what} contains NaN or inf")
+        return th.as_tensor(arr, device=self.device), single
+
+    def _pair_values(self, obs: th.Tensor, goals: th.Tensor, quantities: Sequence[str]) -> Dict[str, th.Tensor]:
+        """Per-member values for aligned ``(obs[i], goals[i])`` pairs, as ``(E, B)`` tensors."""
+        def feats(net) -> th.Tensor:
+            fe = net.features_extractor
+            codes = fe.encode(th.cat([obs, goals], 0))
+            return th.cat(codes.split([obs.shape[0], goals.shape[0]]), 1)
+
+        actions = self.actor.action_from_features(feats(self.actor))
+        out = {}
+        for q in quantities:
+            critic = self.critic if q == "distance" else self.cost_critic
+            out[q] = critic.expected(critic.logits_from_features(feats(critic), actions))
+        return out
+
+    @th.inference_mode()
+    def values(self, obs: Any, goals: Any, quantities: Sequence[str] = ("distance", "cost"),
+               aggregate: str = "max") -> Dict[str, np.ndarray]:
+        """Elementwise distance (steps) and/or cumulative cost from ``obs[i]`` to ``goals[i]``.
+
+        ``obs`` and ``goals`` are raw observations: one of shape ``obs_shape`` each, or batches
+        ``(N, *obs_shape)`` of equal length. Returns arrays of shape ``(N,)`` (a 0-d array for
+        a single pair), or ``(E, N)`` with ``aggregate="none"``.
+        """
+        self._check_quantities(quantities)
+        o, single_o = self._as_batch(obs, "obs")
+        g, single_g = self._as_batch(goals, "goal")
+        if o.shape[0] != g.shape[0]:
+            raise ValueError(f"obs and goal batches must have the same length, got {o.shape[0]} and {g.shape[0]}")
+        vals = self._pair_values(o, g, quantities)
+        out = {}
+        for q, v in vals.items():
+            a = _aggregate(v, aggregate).cpu().numpy()
+            out[q] = a[..., 0] if (single_o and single_g) else a
+        return out
+
+    @staticmethod
+    def _check_quantities(quantities: Sequence[str]) -> None:
+        bad = [q for q in quantities if q not in ("distance", "cost")]
+        if bad or not quantities:
+            raise ValueError(f"quantities must be a non-empty subset of ('distance', 'cost'), got {list(quantities)!r}")
+
+    @th.inference_mode()
+    def pairwise(
+        self,
+        obs_a: Any,
+        obs_b: Any,
+        quantities: Sequence[str] = ("distance", "cost"),
+        aggregate: str = "max",
+        chunk_size: int = 2048,
+    ) -> Dict[str, np.ndarray]:
+        """Distance and/or cost from every ``obs_a[i]`` to every ``obs_b[j]``: ``(N, M)`` float32 arrays.
+
+        ``obs_a`` ``(N, *obs_shape)`` and ``obs_b`` ``(M, *obs_shape)`` are raw observations
+        (``obs_b`` used as goals). Each observation is encoded once per network and its
+        first-layer product computed once; a pair then costs a broadcast sum and the remaining
+        small layers. The actor's action for a pair is computed once and shared by both
+        critics. Pairs are processed in blocks of about ``chunk_size`` (memory stays bounded
+        and the working set stays in cache), without gradients. With ``aggregate="none"`` the
+        arrays are ``(E, N, M)``.
+        """
+        self._check_quantities(quantities)
+        if aggregate not in AGGREGATES:
+            raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+        if int(chunk_size) < 1:
+            raise ValueError(f"chunk_size must be >= 1, got {chunk_size!r}")
+        a, _ = self._as_batch(obs_a, "obs_a")
+        b, _ = self._as_batch(obs_b, "obs_b")
+        n, m = a.shape[0], b.shape[0]
+        critics = {q: (self.critic if q == "distance" else self.cost_critic) for q in quantities}
+        actor_parts = _first_layer_products(self.actor.features_extractor, self.actor.mu, a, b)
+        critic_parts = {q: _first_layer_products(c.features_extractor, c.head, a, b) for q, c in critics.items()}
+        out = {q: np.empty((n, m) if aggregate != "none" else (c.n_members, n, m), dtype=np.float32)
+               for q, c in critics.items()}
+        views = {q: th.from_numpy(v) for q, v in out.items()}
+        cols = min(m, int(chunk_size))
+        rows = max(1, int(chunk_size) // max(cols, 1))
+        for j0 in range(0, m, cols):
+            j1 = min(m, j0 + cols)
+            for i0 in range(0, n, rows):
+                i1 = min(n, i0 + rows)
+                actions = th.tanh(_pair_head(self.actor.mu, actor_parts, i0, i1, j0, j1))  # (1, P, A)
+                for q, c in critics.items():
+                    v = c.expected(_pair_head(c.head, critic_parts[q], i0, i1, j0, j1, actions))  # (E, P)
+                    v = _aggregate(v, aggregate)
+                    if aggregate == "none":
+                        views[q][:, i0:i1, j0:j1] = v.reshape(c.n_members, i1 - i0, j1 - j0)
+                    else:
+                        views[q][i0:i1, j0:j1] = v.reshape(i1 - i0, j1 - j0)
+        return out
+
+
+def _first_layer_products(fe: GoalPairExtractor, head: EnsembleHead, a: th.Tensor, b: th.Tensor):
+    """First-layer pre-activations of ``a`` as observations ``(E, N, H)`` and ``b`` as goals
+    ``(E, M, H)`` (bias included), plus the action block of the weight (``None`` for the actor)."""
+    code_a, code_b = fe.encode(a), fe.encode(b)
+    d = code_a.shape[1]
+    in_dim = head.layers[0].weight.shape[1]
+    sizes = [d, d] + ([in_dim - 2 * d] if in_dim > 2 * d else [])
+    (w_obs, w_goal, *w_act), bias = head.first_layer_parts(sizes)
+    pre_a = th.matmul(code_a.unsqueeze(0), w_obs).contiguous()
+    pre_b = th.baddbmm(bias, code_b.unsqueeze(0).expand(head.n_members, -1, -1), w_goal).contiguous()
+    return pre_a, pre_b, (w_act[0] if w_act else None)
+
+
+def _pair_head(head: EnsembleHead, parts, i0: int, i1: int, j0: int, j1: int,
+               actions: Optional[th.Tensor] = None) -> th.Tensor:
+    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``[i0, i1) x [j0, j1)`` (row-major)."""
+    pre_a, pre_b, w_act = parts
+    e = head.n_members
+    h = th.add(pre_a[:, i0:i1, None, :], pre_b[:, None, j0:j1, :]).view(e, (i1 - i0) * (j1 - j0), -1)
+    if w_act is not None:
+        h.baddbmm_(actions.expand(e, -1, -1), w_act)
+    h = _activate_(h, head.act)
+    layers = head.layers[1:]
+    for k, layer in enumerate(layers):
+        h = th.baddbmm(layer.bias, h, layer.weight)
+        if k < len(layers) - 1:
+            h = _activate_(h, head.act)
+    return h
+
+
+def _activate_(h: th.Tensor, act: nn.Module) -> th.Tensor:
+    """Apply ``act`` in place where it is a ReLU (no extra buffer), out of place otherwise."""
+    return h.relu_() if isinstance(act, nn.ReLU) else act(h)
+
+
+MultiInputPolicy = SafeGoalPolicy
+
+__all__ = [
+    "AGGREGATES",
+    "CategoricalCritic",
+    "EnsembleHead",
+    "EnsembleLinear",
+    "GoalActor",
+    "GoalPairExtractor",
+    "MlpEncoder",
+    "MultiInputPolicy",
+    "PanoramaEncoder",
+    "SafeGoalPolicy",
+]

@@ -1,0 +1,111 @@
+"""``safe-mapf train``: train the goal-conditioned safe agent, one stage at a time."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from agents.training import TrainConfig
+
+    d = TrainConfig()
+    p = sub.add_parser(
+        "train", help="train the goal-conditioned safe agent (unconstrained or constrained stage)",
+        description=run.__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        epilog="example: safe-mapf train --env SafeCentralObstacle-v0 --stage unconstrained --out runs/u; "
+               "safe-mapf train --env SafeCentralObstacle-v0 --stage constrained --init runs/u/model.zip --out runs/c",
+    )
+    p.add_argument("--env", dest="env_id", default=d.env_id, help="registered environment id")
+    p.add_argument("--stage", choices=["unconstrained", "constrained"], default=d.stage,
+                   help="train from scratch, or fine-tune --init with the Lagrange multiplier")
+    p.add_argument("--timesteps", type=int, default=d.timesteps, help="environment steps of this stage")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--out", dest="out_dir", default=None,
+                   help="output folder (default runs/<env>-<stage>-s<seed>): model.zip, config.json, "
+                        "evaluations.jsonl, summary.json")
+    p.add_argument("--init", default=None, help="checkpoint to fine-tune (required for --stage constrained)")
+    g = p.add_argument_group("training problems")
+    g.add_argument("--sampler", choices=["self", "oracle", "uniform"], default=d.sampler,
+                   help="self: the paper's self-sampling; oracle: SoRB's ground-truth geodesic band; uniform")
+    g.add_argument("--target-distance", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.target_distance),
+                   help="self-sampling: band of desired predicted distances (steps)")
+    g.add_argument("--target-cost", type=float, nargs=2, metavar=("LO", "HI"), default=None,
+                   help="self-sampling: band of desired predicted costs (default: distance only)")
+    g.add_argument("--cost-fraction", type=float, default=d.cost_fraction,
+                   help="self-sampling: share of the kept problems chosen with --target-cost")
+    g.add_argument("--n-candidates", type=int, default=d.n_candidates, help="self-sampling: N")
+    g.add_argument("--n-keep", type=int, default=d.n_keep, help="self-sampling: K")
+    g.add_argument("--disagreement-weight", type=float, default=d.disagreement_weight)
+    g.add_argument("--oracle-band", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.oracle_band),
+                   help="oracle sampler: geodesic goal distance band (world units)")
+    g = p.add_argument_group("constrained stage")
+    g.add_argument("--cost-limit", type=float, default=d.cost_limit, help="episode-cost limit delta")
+    g.add_argument("--lagrange-lr", type=float, default=d.lagrange_lr)
+    g.add_argument("--lagrange-init", type=float, default=d.lagrange_init)
+    g.add_argument("--lagrange-max", type=float, default=None)
+    g.add_argument("--lagrange-update-episodes", type=int, default=d.lagrange_update_episodes)
+    g = p.add_argument_group("learning")
+    g.add_argument("--batch-size", type=int, default=d.batch_size)
+    g.add_argument("--learning-rate", type=float, default=d.learning_rate, help="critic learning rate")
+    g.add_argument("--actor-learning-rate", type=float, default=None, help="default: --learning-rate")
+    g.add_argument("--buffer-size", type=int, default=d.buffer_size)
+    g.add_argument("--learning-starts", type=int, default=d.learning_starts)
+    g.add_argument("--n-critics", type=int, default=d.n_critics)
+    g.add_argument("--n-cost-critics", type=int, default=d.n_cost_critics)
+    g.add_argument("--net-arch", type=int, nargs="+", default=d.net_arch, help="hidden widths of the heads")
+    g.add_argument("--encoder-arch", type=int, nargs="+", default=d.encoder_arch, help="MLP encoder widths")
+    g.add_argument("--distance-bins", type=int, default=None, help="default: the episode step limit")
+    g.add_argument("--cost-bins", type=int, default=d.cost_bins)
+    g.add_argument("--cost-max", type=float, default=d.cost_max)
+    g.add_argument("--action-noise", type=float, default=d.action_noise)
+    g.add_argument("--her-ratio", type=float, default=d.her_ratio)
+    g.add_argument("--random-goal-ratio", type=float, default=d.random_goal_ratio)
+    g = p.add_argument_group("evaluation and output")
+    g.add_argument("--eval-freq", type=int, default=d.eval_freq, help="steps between evaluations and checkpoints")
+    g.add_argument("--eval-problems", type=int, default=d.eval_problems)
+    g.add_argument("--eval-max-distance", type=float, default=d.eval_max_distance)
+    g.add_argument("--eval-pairs", type=int, default=d.eval_pairs)
+    g.add_argument("--eval-seed", type=int, default=d.eval_seed)
+    g.add_argument("--threads", type=int, default=d.threads, help="torch threads")
+    g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
+    g.add_argument("--tensorboard", dest="tensorboard_log", default=None, help="TensorBoard folder")
+    g.add_argument("--verbose", type=int, default=d.verbose)
+    g.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def config_from_args(args: argparse.Namespace):
+    """A :class:`agents.training.TrainConfig` from parsed arguments."""
+    import dataclasses
+
+    from agents.training import TrainConfig
+
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    kwargs = {k: v for k, v in vars(args).items() if k in names}
+    for k in ("target_distance", "target_cost", "oracle_band"):
+        if kwargs.get(k) is not None:
+            kwargs[k] = tuple(kwargs[k])
+    return TrainConfig(**kwargs)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Train one stage of the goal-conditioned safe agent and evaluate it periodically.
+
+    Writes model.zip, checkpoint.zip, config.json, evaluations.jsonl and summary.json to the
+    output folder and prints the final held-out figures (success rate on pairs within
+    --eval-max-distance, mean episode cost, Spearman correlation of predicted distances).
+    """
+    from agents.training import train_stage
+
+    cfg = config_from_args(args)
+    summary = train_stage(cfg, command=["safe-mapf", *sys.argv[1:]] if sys.argv else None)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        ev = summary["final_evaluation"]
+        print(f"{summary['env_id']} {summary['stage']}: {summary['timesteps']} steps in {summary['wall_s']} s "
+              f"(cpu {summary['cpu_s']} s); success={ev['success_rate']:.3f} cost={ev['mean_cost']:.2f} "
+              f"spearman={ev['distance_spearman']:.3f} lambda={summary['lagrange_multiplier']:.3f}; "
+              f"saved {summary['model']}")
+    return 0

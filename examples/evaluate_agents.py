@@ -1,0 +1,129 @@
+"""Measure the shipped (or given) agents on SafeCentralObstacle-v0 and print the figures.
+
+    python examples/evaluate_agents.py
+    python examples/evaluate_agents.py --unconstrained runs/u/model.zip --constrained runs/c/model.zip
+
+On held-out random start-goal pairs drawn with a fixed seed (ground truth is used to pick
+and score the pairs, never by the agents):
+
+- success within the 20-step limit and mean episode cost of both agents on the same pairs
+  whose geodesic distance is at most 10 units;
+- Spearman rank correlation between predicted distance and geodesic distance for pairs
+  within 15 units;
+- wall and CPU time to build the planner's matrices D and C for 1000 observations
+  (10^6 pairs, full ensembles).
+
+Targets (printed next to the figures): success >= 0.95 for both agents; Spearman >= 0.9;
+constrained mean cost <= unconstrained mean cost and below the cost limit; D and C in
+about 5 s.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+import safe_mapf_envs  # noqa: F401
+from agents import SafeGoalTD3, load_pretrained
+from agents.evaluation import distance_rank_correlation, run_episodes, sample_problems
+from agents.self_sampling import observations_at
+
+
+@dataclass
+class Settings:
+    """What to measure."""
+
+    env_id: str = "SafeCentralObstacle-v0"
+    """environment of the agents"""
+    seed: int = 2024
+    """seed of the held-out pairs (training and its periodic evaluation use other seeds)"""
+    n_episodes: int = 500
+    """pairs for the success and cost figures"""
+    max_distance: float = 10.0
+    """largest geodesic distance of those pairs (world units)"""
+    n_pairs: int = 1000
+    """pairs for the distance correlation"""
+    pair_max_distance: float = 15.0
+    """largest geodesic distance of those pairs"""
+    n_nodes: int = 1000
+    """observations for the D and C timing"""
+
+
+def mark(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
+
+
+def time_matrices(model: SafeGoalTD3, nodes: np.ndarray, threads: int) -> dict:
+    torch.set_num_threads(threads)
+    model.pairwise(nodes[:50], nodes[:50])  # warm-up
+    out = {}
+    w, c = time.perf_counter(), time.process_time()
+    model.pairwise(nodes, nodes)
+    out["joint"] = (time.perf_counter() - w, time.process_time() - c)
+    w, c = time.perf_counter(), time.process_time()
+    model.pairwise_distance(nodes, nodes)
+    model.pairwise_cost(nodes, nodes)
+    out["separate"] = (time.perf_counter() - w, time.process_time() - c)
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--unconstrained", default=None, help="checkpoint (default: the shipped one)")
+    p.add_argument("--constrained", default=None, help="checkpoint (default: the shipped one)")
+    p.add_argument("--seed", type=int, default=Settings.seed)
+    p.add_argument("--episodes", type=int, default=Settings.n_episodes)
+    p.add_argument("--skip-timing", action="store_true")
+    args = p.parse_args()
+    s = Settings(seed=args.seed, n_episodes=args.episodes)
+    torch.set_num_threads(1)
+
+    agents = {
+        "unconstrained": load_pretrained(s.env_id, "unconstrained", path=args.unconstrained),
+        "constrained": load_pretrained(s.env_id, "constrained", path=args.constrained),
+    }
+    import gymnasium as gym
+
+    env = gym.make(s.env_id)
+    rng = np.random.default_rng(s.seed)
+    starts, goals, _ = sample_problems(env, s.n_episodes, rng, s.max_distance)
+    ps, pg, pd = sample_problems(env, s.n_pairs, rng, s.pair_max_distance)
+
+    print(f"{s.env_id}: {s.n_episodes} held-out pairs with geodesic distance <= {s.max_distance:g} "
+          f"(seed {s.seed}), 20-step limit")
+    results = {}
+    for name, model in agents.items():
+        ep = run_episodes(model, env, starts, goals)
+        corr = distance_rank_correlation(model, env, ps, pg, pd, aggregate="max")
+        results[name] = dict(success=ep["success"].mean(), cost=ep["cost"].mean(), steps=ep["steps"].mean(),
+                             spearman=corr["spearman"], lam=model.lagrange_multiplier,
+                             limit=model.lagrangian.cost_limit)
+        r = results[name]
+        print(f"  {name:13s} success={r['success']:.3f} [{mark(r['success'] >= 0.95)} >= 0.95]  "
+              f"mean episode cost={r['cost']:.3f}  mean steps={r['steps']:.2f}  lambda={r['lam']:.3f}")
+    u, c = results["unconstrained"], results["constrained"]
+    print(f"  constrained cost {c['cost']:.3f} vs unconstrained {u['cost']:.3f} "
+          f"[{mark(c['cost'] <= u['cost'])} no higher]; cost limit {c['limit']:g} "
+          f"[{mark(c['cost'] < c['limit'])} under]")
+    print(f"Predicted vs geodesic distance, {s.n_pairs} pairs within {s.pair_max_distance:g} units "
+          f"(ensemble max):")
+    for name, r in results.items():
+        print(f"  {name:13s} Spearman={r['spearman']:.3f} [{mark(r['spearman'] >= 0.9)} >= 0.9]")
+
+    if not args.skip_timing:
+        model = agents["unconstrained"]
+        nodes = observations_at(env, env.unwrapped.sample_states(s.n_nodes, np.random.default_rng(s.seed + 1)))
+        print(f"D and C for {s.n_nodes} observations ({s.n_nodes ** 2:.0e} pairs, "
+              f"{model.policy.n_critics}+{model.policy.n_cost_critics} critics, aggregate max):")
+        for threads in (1, 2):
+            t = time_matrices(model, nodes, threads)
+            for how, (wall, cpu) in t.items():
+                print(f"  torch threads={threads} {how:8s}: wall {wall:.2f} s, cpu {cpu:.2f} s "
+                      f"[{mark(wall <= 5.0)} <= 5 s]")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,46 @@
+"""``safe-mapf train``: both stages end to end on a tiny map, files and errors."""
+import json
+
+import torch as th
+
+from agents import SafeGoalTD3
+from baselines.cli import main
+
+th.set_num_threads(1)
+
+TINY = ["--env", "SafeCenterDot-v0", "--timesteps", "300", "--learning-starts", "100", "--eval-freq", "150",
+        "--eval-problems", "5", "--eval-pairs", "20", "--eval-max-distance", "5", "--no-progress",
+        "--net-arch", "16", "16", "--encoder-arch", "16", "--n-candidates", "50", "--n-keep", "10"]
+
+
+def test_train_both_stages(tmp_path, capsys):
+    u, c = tmp_path / "u", tmp_path / "c"
+    assert main(["train", "--stage", "unconstrained", "--out", str(u), *TINY]) == 0
+    out = capsys.readouterr().out
+    assert "SafeCenterDot-v0 unconstrained: 300 steps" in out and "[eval] steps=300" in out
+    for name in ("model.zip", "checkpoint.zip", "config.json", "evaluations.jsonl", "summary.json"):
+        assert (u / name).exists(), name
+    config = json.loads((u / "config.json").read_text())
+    assert config["config"]["stage"] == "unconstrained" and config["config"]["net_arch"] == [16, 16]
+    assert "torch" in config["versions"]
+    evals = [json.loads(line) for line in (u / "evaluations.jsonl").read_text().splitlines()]
+    assert [e["timesteps"] for e in evals] == [150, 300]
+    summary = json.loads((u / "summary.json").read_text())
+    assert summary["timesteps"] == 300 and summary["wall_s"] > 0 and summary["cpu_s"] > 0
+
+    assert main(["train", "--stage", "constrained", "--init", str(u / "model.zip"), "--out", str(c),
+                 "--cost-limit", "0", "--lagrange-update-episodes", "1", "--target-cost", "5", "10", *TINY]) == 0
+    model = SafeGoalTD3.load(c / "model.zip")
+    assert model.constrained and model.lagrangian.cost_limit == 0.0
+    assert model.lagrange_multiplier > 0  # every episode costs more than a zero limit
+    assert model.sampler.target_cost == (5.0, 10.0)
+
+
+def test_constrained_stage_needs_init(tmp_path, capsys):
+    assert main(["train", "--stage", "constrained", "--out", str(tmp_path), *TINY]) == 2
+    assert "--init" in capsys.readouterr().err
+
+
+def test_missing_init_checkpoint(tmp_path, capsys):
+    assert main(["train", "--stage", "constrained", "--init", str(tmp_path / "nope.zip"), *TINY]) == 2
+    assert "does not exist" in capsys.readouterr().err
