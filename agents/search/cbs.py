@@ -52,6 +52,7 @@ from .cbs_lowlevel import (
     Reservation,
     SearchTimeout,
     build_mdd,
+    earliest_arrival,
     focal_search,
     mdds_dependent,
     pair_conflicts,
@@ -247,11 +248,18 @@ class _Context:
         self.mdds: Dict[Tuple[int, int], MDD] = {}
         self.pairs: Dict[Tuple[int, int, int, int], int] = {}
         self.dependent: Dict[Tuple[int, int, int, int], bool] = {}
+        self.arrivals: Dict[Tuple[int, int, int, Optional[int]], int] = {}
         self.compiled: Dict[Tuple[int, int], object] = {}
         self.stats = CBSStats()
         self.ids = itertools.count()
         self._corridors = None
         self.geometry = None
+        size = options._pair_check_size()
+        #: when to run the deferred pair feasibility check (None: never)
+        self.pair_check_at: Optional[float] = (
+            _time.perf_counter() + 1.0
+            if options.pair_check_states < size <= 100 * options.pair_check_states else None)
+        self.infeasible_reason: Optional[str] = None
         if options.symmetry and inst.unit and options.grid_coords is not None:
             self.geometry = GridGeometry(inst, options.grid_coords)
 
@@ -496,7 +504,20 @@ class _CBS:
         p1, p2 = node.paths[l1], node.paths[l2]
         corridors = ctx.corridors()
         if corridors is not None:
-            br = corridors.split(c, c.a1, p1, c.a2, p2)
+            def earliest(gid: int, target: int, cid: Optional[int]) -> int:
+                cons = node.cons[self.local[gid]]
+                key = (gid, cons.key, target, cid)
+                val = ctx.arrivals.get(key)
+                if val is None:
+                    blocked = corridors.inner_sets[cid] if cid is not None else frozenset()
+                    val = earliest_arrival(self.inst, gid, ctx.compile(gid, cons), target, blocked,
+                                           ctx.deadline, ctx.counter)
+                    if len(ctx.arrivals) > 200_000:
+                        ctx.arrivals.clear()
+                    ctx.arrivals[key] = val
+                return val
+
+            br = corridors.split(c, c.a1, p1, c.a2, p2, earliest)
             if br is not None:
                 cards = []
                 for gid, cons in br:
@@ -647,7 +668,8 @@ class _CBS:
         root = self._root()
         if root is None:
             return "infeasible", None
-        stats.hl_generated += 1
+        if not self.sub:
+            stats.hl_generated += 1
         self.lower_bound = root.f
         open_list = [root]
         while open_list:
@@ -655,6 +677,11 @@ class _CBS:
             if node.f > self.lower_bound:
                 self.lower_bound = node.f
             ctx.check_time()
+            if ctx.pair_check_at is not None and not self.sub and _time.perf_counter() > ctx.pair_check_at:
+                ctx.pair_check_at = None
+                ctx.infeasible_reason = ctx.opt._pair_check()
+                if ctx.infeasible_reason is not None:
+                    return "infeasible", None
             if not node.h_done and self.heuristic != "none" and node.conflicts:
                 h = self._compute_h(node)
                 node.h_done = True
@@ -760,6 +787,11 @@ class _ECBS(_CBS):
         self.lower_bound = root.lb
         while True:
             ctx.check_time()
+            if ctx.pair_check_at is not None and _time.perf_counter() > ctx.pair_check_at:
+                ctx.pair_check_at = None
+                ctx.infeasible_reason = ctx.opt._pair_check()
+                if ctx.infeasible_reason is not None:
+                    return "infeasible", None
             while open_lb and open_lb[0][2].closed:
                 heapq.heappop(open_lb)
             if not open_lb:
@@ -864,8 +896,9 @@ class CBSSolver:
         node_limit: high-level expansions; the search ends with status ``"timeout"``.
         pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
             (past it the pair's lower bound is used, which keeps the heuristic admissible).
-        pair_check_states: run an exact two-agent feasibility check of every pair (to prove
-            infeasibility) when ``pairs * N**2`` is at most this.
+        pair_check_states: an exact two-agent feasibility check of every pair (which can prove
+            infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
+            once the search has run for a second when it is at most 100 times this.
     """
 
     def __init__(
@@ -887,7 +920,7 @@ class CBSSolver:
         time_limit: float = 60.0,
         node_limit: Optional[int] = None,
         pair_node_limit: int = 64,
-        pair_check_states: int = 200_000,
+        pair_check_states: int = 20_000,
     ):
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -937,13 +970,21 @@ class CBSSolver:
                         if inst.near_mat[nodes[a], nodes[b]]:
                             return (f"the {what}s of agents {a} and {b} ({nodes[a]}, {nodes[b]}) are closer "
                                     "than the proximity radius")
+        if self._pair_check_size() <= self.pair_check_states:
+            return self._pair_check()
+        return None
+
+    def _pair_check_size(self) -> int:
+        k = self.instance.n_agents
+        return k * (k - 1) // 2 * self.instance.n_nodes ** 2
+
+    def _pair_check(self) -> Optional[str]:
+        inst = self.instance
         k = inst.n_agents
-        pairs = k * (k - 1) // 2
-        if pairs and pairs * inst.n_nodes ** 2 <= self.pair_check_states:
-            for a in range(k):
-                for b in range(a + 1, k):
-                    if not _pair_feasible(inst, a, b):
-                        return f"agents {a} and {b} cannot both reach their goals, even ignoring the others"
+        for a in range(k):
+            for b in range(a + 1, k):
+                if not _pair_feasible(inst, a, b):
+                    return f"agents {a} and {b} cannot both reach their goals, even ignoring the others"
         return None
 
     # -------------------------------------------------------------- solve
@@ -983,7 +1024,8 @@ class CBSSolver:
             return finish(CBSResult("timeout", lower_bound=lb,
                                     message=f"time limit of {self.time_limit:g} s reached"))
         if status == "infeasible":
-            return finish(CBSResult("infeasible", message="the constraint tree was exhausted: no solution exists"))
+            msg = ctx.infeasible_reason or "the constraint tree was exhausted: no solution exists"
+            return finish(CBSResult("infeasible", message=msg))
         if status == "limit":
             return finish(CBSResult("timeout", lower_bound=search.lower_bound or None,
                                     message=f"node limit of {self.node_limit} expansions reached"))

@@ -237,6 +237,26 @@ def _horizon(cc: CompiledConstraints, res: Optional[Reservation]) -> int:
     return h + 1
 
 
+def _landmarks(inst: MapfInstance, agent: int, cc: CompiledConstraints) -> Dict[int, List[Tuple[int, int, int]]]:
+    """For finite range constraints on a node B: node -> [(start, end, bound)] for the nodes whose
+    every path to the goal crosses B; from such a node at a time in [start, end] the final
+    arrival is at least ``bound = end + 1 + h(B)`` (B is closed until ``end``). Cached on ``cc``."""
+    lm = getattr(cc, "_landmarks", None)
+    if lm is None:
+        lm = {}
+        h = inst.h[agent]
+        g = inst.goals[agent]
+        for node, lo, hi in cc.ranges:
+            hb = h[node]
+            if hb >= UNREACHABLE:
+                continue
+            entry = (lo, hi, hi + 1 + hb)
+            for v in inst.must_pass(g, node):
+                lm.setdefault(v, []).append(entry)
+        cc._landmarks = lm
+    return lm
+
+
 def _reconstruct(code: int, parent: Dict[int, int], tclose: Dict[int, int], N: int) -> List[Tuple[int, int]]:
     out = []
     while code >= 0:
@@ -244,6 +264,17 @@ def _reconstruct(code: int, parent: Dict[int, int], tclose: Dict[int, int], N: i
         code = parent[code]
     out.reverse()
     return out
+
+
+def _hstart(hs: int, gl: int, lm, s: int) -> int:
+    """The time-aware heuristic of the start state (time 0)."""
+    if hs < gl:
+        hs = gl
+    if lm is not None:
+        for lo, hi, bound in lm.get(s, ()):
+            if lo <= 0 <= hi and hs < bound:
+                hs = bound
+    return hs
 
 
 class Counter:
@@ -282,6 +313,9 @@ def space_time_astar(
     goal_min = cc.goal_min
     if inst.unit and s in cc.vset:
         return None
+    gl = goal_min + 1
+    lm = _landmarks(inst, agent, cc) if cc.ranges else None
+    hs = _hstart(hs, gl, lm, s)
     L = _horizon(cc, res)
     expand = make_expander(inst, cc, res)
     heap = [(hs, 0, hs, s)]
@@ -309,6 +343,14 @@ def space_time_astar(
             hw = h[w]
             if hw >= UNREACHABLE:
                 continue
+            if nt + hw < gl:
+                hw = gl - nt
+            if lm is not None:
+                lst = lm.get(w)
+                if lst is not None:
+                    for lo, hi, bound in lst:
+                        if lo <= nt <= hi and nt + hw < bound:
+                            hw = bound - nt
             ncode = (nt if nt < L else L) * N + w
             if ncode in tclose:
                 continue
@@ -352,6 +394,9 @@ def focal_search(
     goal_min = cc.goal_min
     if inst.unit and s in cc.vset:
         return None
+    gl = goal_min + 1
+    lm = _landmarks(inst, agent, cc) if cc.ranges else None
+    hs = _hstart(hs, gl, lm, s)
     L = _horizon(cc, res)
     expand = make_expander(inst, cc, res)
     pop, push = heapq.heappop, heapq.heappush
@@ -399,6 +444,14 @@ def focal_search(
             hx = h[x]
             if hx >= UNREACHABLE:
                 continue
+            if nt + hx < gl:
+                hx = gl - nt
+            if lm is not None:
+                lst = lm.get(x)
+                if lst is not None:
+                    for lo, hi, bound in lst:
+                        if lo <= nt <= hi and nt + hx < bound:
+                            hx = bound - nt
             ncode = (nt if nt < L else L) * N + x
             if ncode in tclose:
                 continue
@@ -415,6 +468,56 @@ def focal_search(
                 push(focal, (nc, nf, -nt, ncode, hx))
             else:
                 push(pending, (nf, nc, hx, ncode))
+
+
+def earliest_arrival(
+    inst: MapfInstance,
+    agent: int,
+    cc: CompiledConstraints,
+    target: int,
+    blocked: frozenset,
+    deadline: float,
+    counter: Counter,
+) -> int:
+    """Earliest time ``agent`` can be at ``target`` under ``cc`` without entering ``blocked`` (unit time).
+
+    Returns ``UNREACHABLE`` if it never can. Used to size corridor constraints.
+    """
+    N = inst.n_nodes
+    hd = inst.dist_to(target, blocked)
+    s = inst.starts[agent]
+    if hd[s] >= UNREACHABLE:
+        return UNREACHABLE
+    if s == target:
+        return 0
+    L = cc.t_static + 1
+    expand = make_expander(inst, cc, None)
+    heap = [(hd[s], hd[s], s)]
+    closed: Set[int] = set()
+    pops = 0
+    while heap:
+        f, hv, code = heapq.heappop(heap)
+        if code in closed:
+            continue
+        closed.add(code)
+        v = code % N
+        t = f - hv
+        if v == target:
+            counter.expanded += pops
+            return t
+        pops += 1
+        if not pops & 1023 and _time.perf_counter() > deadline:
+            counter.expanded += pops
+            raise SearchTimeout
+        for w, nt, _ in expand(v, t):
+            hw = hd[w]
+            if hw >= UNREACHABLE or w in blocked:
+                continue
+            ncode = (nt if nt < L else L) * N + w
+            if ncode not in closed:
+                heapq.heappush(heap, (nt + hw, hw, ncode))
+    counter.expanded += pops
+    return UNREACHABLE
 
 
 # ---------------------------------------------------------------------------------- MDDs

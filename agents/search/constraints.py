@@ -17,7 +17,7 @@ every set has a unique integer ``key`` that caches (MDDs, pair sub-problems) can
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Dict, Iterator, List, Optional, Set, Tuple, Union
 
 #: The ``end`` of a :class:`RangeConstraint` that never expires.
@@ -126,6 +126,7 @@ class CompiledConstraints:
         goal_min: the final arrival at the goal must be strictly later than this (-1: none).
         t_static: after this step the constraints no longer change with time.
         impossible: the constraints can never be met (e.g. the goal is forbidden for good).
+        ranges: the finite range constraints ``(node, start, end)`` (they sharpen the heuristic).
     """
 
     vset: Set[int]
@@ -134,6 +135,7 @@ class CompiledConstraints:
     goal_min: int
     t_static: int
     impossible: bool = False
+    ranges: List[Tuple[int, int, int]] = field(default_factory=list)
 
 
 def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> CompiledConstraints:
@@ -144,6 +146,7 @@ def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> Compile
     goal_min = -1
     t_static = 0
     impossible = False
+    ranges: List[Tuple[int, int, int]] = []
     N = n_nodes
     for c in cons:
         if isinstance(c, VertexConstraint):
@@ -162,6 +165,7 @@ def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> Compile
                 if c.node == goal:
                     impossible = True
             else:
+                ranges.append((c.node, c.start, c.end))
                 for t in range(c.start, c.end + 1):
                     vset.add(t * N + c.node)
                 t_static = max(t_static, c.end)
@@ -172,7 +176,7 @@ def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> Compile
         else:  # pragma: no cover - guarded by the type
             raise TypeError(f"unknown constraint {c!r}")
     t_static = max(t_static, goal_min + 1)
-    return CompiledConstraints(vset, eset, forever, goal_min, t_static, impossible)
+    return CompiledConstraints(vset, eset, forever, goal_min, t_static, impossible, ranges)
 
 
 # ---------------------------------------------------------------------------------- conflicts

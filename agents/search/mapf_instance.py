@@ -252,6 +252,60 @@ class MapfInstance:
             self._h_array = np.zeros((0, n), dtype=np.int64)
         #: per agent, the true distance (in steps) from every node to its goal.
         self.h: List[List[int]] = [row.tolist() for row in self._h_array]
+        self._pred: Optional[List[List[int]]] = None
+        self._must_pass: Dict[Tuple[int, int], frozenset] = {}
+        self._dist_to: Dict[Tuple[int, frozenset], List[int]] = {}
+
+    # ------------------------------------------------------------------ graph helpers
+    @property
+    def pred(self) -> List[List[int]]:
+        """Predecessor lists (waits excluded)."""
+        if self._pred is None:
+            pred: List[List[int]] = [[] for _ in range(self.n_nodes)]
+            for u in range(self.n_nodes):
+                for v in self.succ[u][1:]:
+                    pred[v].append(u)
+            self._pred = pred
+        return self._pred
+
+    def dist_to(self, target: int, blocked: frozenset = frozenset()) -> List[int]:
+        """Steps from every node to ``target`` (unit time), avoiding ``blocked`` nodes (cached)."""
+        key = (target, blocked)
+        d = self._dist_to.get(key)
+        if d is None:
+            d = [UNREACHABLE] * self.n_nodes
+            d[target] = 0
+            frontier = [target]
+            pred = self.pred
+            step = 0
+            while frontier:
+                step += 1
+                nxt = []
+                for v in frontier:
+                    for u in pred[v]:
+                        if d[u] == UNREACHABLE and u not in blocked:
+                            d[u] = step
+                            nxt.append(u)
+                frontier = nxt
+            if len(self._dist_to) > 20_000:
+                self._dist_to.clear()
+            self._dist_to[key] = d
+        return d
+
+    def must_pass(self, goal: int, node: int) -> frozenset:
+        """Nodes (other than ``node``) from which every path to ``goal`` goes through ``node`` (cached)."""
+        key = (goal, node)
+        m = self._must_pass.get(key)
+        if m is None:
+            if node == goal:
+                m = frozenset()
+            else:
+                free = self.dist_to(goal, frozenset((node,)))
+                full = self.dist_to(goal)
+                m = frozenset(v for v in range(self.n_nodes)
+                              if free[v] >= UNREACHABLE and full[v] < UNREACHABLE and v != node)
+            self._must_pass[key] = m
+        return m
 
     @staticmethod
     def _node(v, what: str, i: int, n: int) -> int:

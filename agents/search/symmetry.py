@@ -17,7 +17,7 @@ optimality is kept.
 from __future__ import annotations
 
 from collections import deque
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -45,6 +45,8 @@ class Corridors:
         self.corridor_of: Dict[int, int] = {}
         #: per corridor: (inner nodes from the A side, A, B)
         self.corridors: List[Tuple[List[int], int, int]] = []
+        #: per corridor: its inner nodes as a frozenset
+        self.inner_sets: List[frozenset] = []
         for v in range(n):
             if not inner[v] or v in self.corridor_of:
                 continue
@@ -75,6 +77,7 @@ class Corridors:
             nodes = list(reversed(side_a)) + chain + side_b
             cid = len(self.corridors)
             self.corridors.append((nodes, a, b))
+            self.inner_sets.append(frozenset(nodes))
             for x in nodes:
                 self.corridor_of[x] = cid
         self._from_start: Optional[np.ndarray] = None
@@ -114,13 +117,15 @@ class Corridors:
         return val
 
     # ------------------------------------------------------------------ the split
-    def split(self, c: Conflict, i1: int, p1: AgentPath, i2: int, p2: AgentPath) -> Optional[Branches]:
+    def split(self, c: Conflict, i1: int, p1: AgentPath, i2: int, p2: AgentPath,
+              earliest: Optional[Callable[[int, int, Optional[int]], int]] = None) -> Optional[Branches]:
         """Corridor constraints for a vertex/edge conflict inside a corridor, or ``None``.
 
         Branches: ``agent1 not at B during [0, U1]`` / ``agent2 not at A during [0, U2]`` with
         ``U1 = min(d2(A) + k, d1'(B) - 1)`` and ``U2 = min(d1(B) + k, d2'(A) - 1)``, where ``k``
-        is the number of edges from A to B, ``d`` the distance from the agent's start and ``d'``
-        the distance avoiding the corridor. Soundness: if agent 1 is at B by ``U1 < d1'(B)`` its
+        is the number of edges from A to B, ``d`` a lower bound on the agent's earliest arrival
+        (its distance from its start, or, through ``earliest(agent, node, corridor_or_None)``,
+        the earliest arrival under its constraints) and ``d'`` the same avoiding the corridor. Soundness: if agent 1 is at B by ``U1 < d1'(B)`` its
         first arrival at B came through the corridor from A, and likewise agent 2's at A. If
         the two crossings overlap in time they meet inside the corridor (vertex or swap
         conflict); if agent 1 crosses first, agent 2 can start only after agent 1 left B, so it
@@ -171,8 +176,22 @@ class Corridors:
         av2 = self.avoiding(i2, cid)
         d1p_B = av1[1] if B == b_end else av1[0]
         d2p_A = av2[0] if A == a_end else av2[1]
-        u1 = min(int(self.from_start(i2)[A]) + k, d1p_B - 1)
-        u2 = min(int(self.from_start(i1)[B]) + k, d2p_A - 1)
+        d2_A = int(self.from_start(i2)[A])
+        d1_B = int(self.from_start(i1)[B])
+        u1 = min(d2_A + k, d1p_B - 1)
+        u2 = min(d1_B + k, d2p_A - 1)
+        if (tau1 > u1 or tau2 > u2) and earliest is not None:
+            # sharpen the bounds with the agents' constraints
+            if tau1 > d2_A + k or tau2 > d2p_A - 1:
+                d2_A = max(d2_A, earliest(i2, A, None))
+                if tau2 > d2p_A - 1:
+                    d2p_A = max(d2p_A, earliest(i2, A, cid))
+            if tau2 > d1_B + k or tau1 > d1p_B - 1:
+                d1_B = max(d1_B, earliest(i1, B, None))
+                if tau1 > d1p_B - 1:
+                    d1p_B = max(d1p_B, earliest(i1, B, cid))
+            u1 = min(d2_A + k, d1p_B - 1)
+            u2 = min(d1_B + k, d2p_A - 1)
         if tau1 > u1 or tau2 > u2:
             return None  # the split would not cut the current paths
         return [(i1, (RangeConstraint(i1, B, 0, u1),)), (i2, (RangeConstraint(i2, A, 0, u2),))]
