@@ -1,0 +1,63 @@
+"""The shipped checkpoints: present, small, loadable, sensible; clear errors otherwise."""
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+
+import safe_mapf_envs  # noqa: F401
+from agents import CheckpointError, SafeGoalTD3, load_pretrained
+from agents.evaluation import run_episodes, sample_problems
+from agents.pretrained import available, pretrained_path
+
+th.set_num_threads(1)
+ENV = "SafeCentralObstacle-v0"
+
+
+@pytest.fixture(scope="module", params=["unconstrained", "constrained"])
+def model(request):
+    return request.param, load_pretrained(ENV, request.param)
+
+
+def test_both_kinds_are_shipped_and_small():
+    assert {(ENV, "unconstrained"), (ENV, "constrained")} <= set(available())
+    for kind in ("unconstrained", "constrained"):
+        assert os.path.getsize(pretrained_path(ENV, kind)) < 5_000_000
+
+
+def test_loaded_model_has_the_planner_api(model):
+    kind, m = model
+    assert isinstance(m, SafeGoalTD3) and m.env_id == ENV
+    assert m.constrained == (kind == "constrained")
+    assert m.lagrange_multiplier >= 0.0
+    assert m.policy.n_critics >= 3 and m.policy.n_cost_critics >= 3
+    u = gym.make(ENV).unwrapped
+    a = u.normalize([[5.0, 5.0], [5.0, 5.0], [5.0, 5.0]])
+    b = u.normalize([[7.0, 5.0], [13.0, 5.0], [19.0, 5.0]])
+    d = m.distance(a, b)
+    assert np.all(np.diff(d) > 2.0), d  # farther goals take more steps (6 units apart = 6 steps)
+    assert m.pairwise_distance(a, b).shape == (3, 3)
+    # a trip hugging the block costs more than one along the outer wall
+    near = m.cost(u.normalize([[18.0, 22.0]]), u.normalize([[18.0, 33.0]]), aggregate="mean")
+    far = m.cost(u.normalize([[2.0, 22.0]]), u.normalize([[2.0, 33.0]]), aggregate="mean")
+    assert near[0] > far[0] + 5.0
+
+
+def test_loaded_policy_reaches_nearby_goals(model):
+    _, m = model
+    env = gym.make(ENV)
+    s, g, _ = sample_problems(env, 20, np.random.default_rng(99), max_distance=10.0)
+    assert run_episodes(m, env, s, g)["success"].mean() >= 0.9
+
+
+def test_unknown_kind_or_env():
+    with pytest.raises(ValueError, match="kind"):
+        load_pretrained(ENV, "reckless")
+    with pytest.raises(ValueError, match="available"):
+        load_pretrained("SafeMaze-v0", "unconstrained")
+
+
+def test_checkpoint_of_another_env_is_refused():
+    with pytest.raises(CheckpointError, match="trained on"):
+        load_pretrained("SafeCenterDot-v0", path=pretrained_path(ENV, "unconstrained"))
