@@ -506,6 +506,8 @@ class SafeGoalPolicy(BasePolicy):
         critic_parts = {q: _first_layer_products(c.features_extractor, c.head, a, b) for q, c in critics.items()}
         out = {q: np.empty((n, m) if aggregate != "none" else (c.n_members, n, m), dtype=np.float32)
                for q, c in critics.items()}
+        if n == 0 or m == 0:
+            return out
         views = {q: th.from_numpy(v) for q, v in out.items()}
         cols = min(m, int(chunk_size))
         rows = max(1, int(chunk_size) // max(cols, 1))

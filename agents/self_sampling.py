@@ -16,8 +16,8 @@ Samplers (all give :class:`ProblemResetWrapper` the ``options`` of the next ``re
 
 Environment requirements of :class:`SelfSampler`: ``sample_states(n, rng)`` returning ``n``
 random free states, ``reset(options={"start": s, "goal": g})``, and the observation of a state:
-``observations_at(states)`` where the environment has it (e.g. rendered panoramas), else
-``normalize(states)`` (the vector observation of a position).
+``observations_at(states)`` where the environment has it, else its panorama ``sensor.render``
+for image observations, else ``normalize(states)`` (the vector observation of a position).
 """
 from __future__ import annotations
 
@@ -38,6 +38,9 @@ def observations_at(env: gym.Env, states: np.ndarray) -> np.ndarray:
     fn = getattr(u, "observations_at", None)
     if fn is not None:
         return np.asarray(fn(states))
+    sensor = getattr(u, "sensor", None)
+    if sensor is not None and hasattr(sensor, "render"):  # image observations (panoramas)
+        return np.asarray(sensor.render(np.asarray(states, dtype=np.float64).reshape(-1, 2)))
     fn = getattr(u, "normalize", None)
     if fn is None:
         raise ValueError(f"{type(u).__name__} has neither observations_at(states) nor normalize(states); "

@@ -53,6 +53,11 @@ def test_pairwise_chunking_does_not_change_results(vector_policy, chunk_size):
         np.testing.assert_allclose(got[q], ref[q], rtol=1e-5, atol=1e-5)
 
 
+def test_empty_inputs_give_empty_matrices(vector_policy):
+    out = vector_policy.pairwise(np.zeros((0, 2), np.float32), np.zeros((4, 2), np.float32))
+    assert out["distance"].shape == (0, 4) and out["cost"].shape == (0, 4)
+
+
 def test_value_ranges_follow_the_supports(vector_policy):
     rng = np.random.default_rng(2)
     a = rng.random((20, 2), dtype=np.float32)
