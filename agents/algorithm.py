@@ -49,7 +49,7 @@ import safe_mapf_envs  # noqa: F401  (registers the environment ids)
 from .buffers import GoalCostReplayBuffer, check_goal_space
 from .distributional import categorical_projection, shift_distance_target
 from .lagrangian import LagrangeMultiplier
-from .policies import AGGREGATES, SafeGoalPolicy, _aggregate
+from .policies import SafeGoalPolicy, aggregate_ensemble
 from .self_sampling import ProblemResetWrapper, ProblemSampler, UniformSampler, find_wrappers, make_sampler
 
 SelfSafeGoalTD3 = TypeVar("SelfSafeGoalTD3", bound="SafeGoalTD3")
@@ -375,12 +375,12 @@ class SafeGoalTD3(OffPolicyAlgorithm):
                 actions = self.actor(obs)
                 with th.no_grad():
                     feats_d = self.critic.extract_features(obs)
-                dist = _aggregate(self.critic.expected(self.critic.logits_from_features(feats_d, actions)),
+                dist = aggregate_ensemble(self.critic.expected(self.critic.logits_from_features(feats_d, actions)),
                                   self.actor_aggregate)
                 if lam > 0:
                     with th.no_grad():
                         feats_c = self.cost_critic.extract_features(obs)
-                    cost = _aggregate(self.cost_critic.expected(self.cost_critic.logits_from_features(feats_c, actions)),
+                    cost = aggregate_ensemble(self.cost_critic.expected(self.cost_critic.logits_from_features(feats_c, actions)),
                                       self.actor_aggregate)
                     a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
                 else:

@@ -260,7 +260,7 @@ class CategoricalCritic(BaseModel):
         return th.softmax(logits, dim=-1) @ self.support
 
 
-def _aggregate(values: th.Tensor, aggregate: str) -> th.Tensor:
+def aggregate_ensemble(values: th.Tensor, aggregate: str) -> th.Tensor:
     """Combine ensemble members (axis 0)."""
     if aggregate == "max":
         return values.max(0).values
@@ -464,7 +464,7 @@ class SafeGoalPolicy(BasePolicy):
         vals = self._pair_values(o, g, quantities)
         out = {}
         for q, v in vals.items():
-            a = _aggregate(v, aggregate).cpu().numpy()
+            a = aggregate_ensemble(v, aggregate).cpu().numpy()
             out[q] = a[..., 0] if (single_o and single_g) else a
         return out
 
@@ -518,7 +518,7 @@ class SafeGoalPolicy(BasePolicy):
                 actions = th.tanh(_pair_head(self.actor.mu, actor_parts, i0, i1, j0, j1))  # (1, P, A)
                 for q, c in critics.items():
                     v = c.expected(_pair_head(c.head, critic_parts[q], i0, i1, j0, j1, actions))  # (E, P)
-                    v = _aggregate(v, aggregate)
+                    v = aggregate_ensemble(v, aggregate)
                     if aggregate == "none":
                         views[q][:, i0:i1, j0:j1] = v.reshape(c.n_members, i1 - i0, j1 - j0)
                     else:
@@ -565,6 +565,7 @@ MultiInputPolicy = SafeGoalPolicy
 
 __all__ = [
     "AGGREGATES",
+    "aggregate_ensemble",
     "CategoricalCritic",
     "EnsembleHead",
     "EnsembleLinear",
