@@ -1,0 +1,351 @@
+"""Waypoints for many agents on the replay-buffer graph: CBS over learned distances.
+
+This is the glue between the critics, the :class:`~agents.search.graph.WaypointGraph`, CBS
+and the :class:`~agents.search.controller.WaypointController`:
+
+1. the graph's nodes are observations with predicted distances ``D`` and costs ``C`` between
+   every pair (:meth:`BufferPlanner.from_agent` computes them once);
+2. for a problem, each agent's start and goal observations are attached as extra nodes
+   (their distances and costs to every node come from the same critics);
+3. edges are kept where ``D < d_max`` and ``C < c_max``; an endpoint always keeps its
+   ``endpoint_edges`` cheapest edges, so that an agent that starts (or ends) in a costly
+   place is not cut off;
+4. CBS plans collision-free timed paths. Under the default ``"durative"`` time model an edge
+   takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
+   they are at nodes whose predicted distance (either direction) is below
+   ``proximity_radius`` (buffer nodes are distinct points, so "same node" alone would miss
+   real collisions);
+5. :meth:`MultiAgentPlan.agent_plans` turns the paths into per-agent waypoint observations
+   and departure times for the controller.
+
+If the cost-pruned graph leaves some agent without any path, ``c_max`` is doubled until every
+agent has one (``MultiAgentPlan.c_max`` reports the value used); with ``relax_cost=False``
+the plan is ``"infeasible"`` instead.
+
+Only observations and critic outputs enter the planner; positions never do.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import dijkstra
+
+from .cbs import CBSResult, solve_cbs
+from .controller import AgentPlan
+from .mapf_instance import Proximity
+from .single import risk_bounded_path, shortest_path
+from .graph import WaypointGraph
+
+#: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
+PairwiseFn = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass
+class MultiAgentPlan:
+    """Per-agent waypoints with departure times, from one CBS call.
+
+    Attributes:
+        status: the CBS status (``"optimal"``, ``"suboptimal"``, ``"timeout"``,
+            ``"infeasible"``).
+        nodes: per agent, the node ids it visits in order, start included, goal excluded
+            (ids of the problem graph: ``0..N-1`` buffer nodes, then starts, then goals).
+        depart_times: per agent, the plan time at which it leaves each node of ``nodes``.
+        arrival_times: per agent, the plan time of its final arrival at its goal.
+        soc: sum of arrival times; ``makespan``: the latest one.
+        c_max: the cost cut-off used (larger than asked if it had to be relaxed).
+        planning_time: seconds spent attaching endpoints, pruning and searching.
+        cbs: the full CBS result (paths, statistics).
+        message: why planning ended as it did.
+    """
+
+    status: str
+    nodes: List[List[int]] = field(default_factory=list)
+    depart_times: List[List[int]] = field(default_factory=list)
+    arrival_times: List[int] = field(default_factory=list)
+    soc: Optional[int] = None
+    makespan: Optional[int] = None
+    c_max: float = math.inf
+    planning_time: float = 0.0
+    cbs: Optional[CBSResult] = None
+    message: str = ""
+    predicted_cost: List[float] = field(default_factory=list)
+
+    @property
+    def solved(self) -> bool:
+        return bool(self.nodes)
+
+    def agent_plans(self, node_observations: np.ndarray, goals: np.ndarray,
+                    names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:
+        """Controller plans: waypoint observations (start node included) and departure times.
+
+        Args:
+            node_observations: observations of the problem graph's nodes, indexed by node id
+                (see :attr:`BufferPlanner.last_observations`).
+            goals: the agents' goal observations, ``(K, ...)``.
+            names: agent names (default ``agent_0``, ...).
+        """
+        if not self.solved:
+            raise ValueError(f"no plan to execute: planning ended with status {self.status!r} ({self.message})")
+        k = len(self.nodes)
+        names = list(names) if names is not None else [f"agent_{i}" for i in range(k)]
+        if len(names) != k or len(goals) != k:
+            raise ValueError(f"{k} planned agents but {len(names)} names and {len(goals)} goals")
+        obs = np.asarray(node_observations)
+        return {
+            names[i]: AgentPlan(waypoints=obs[np.asarray(self.nodes[i], dtype=np.int64)], goal=np.asarray(goals[i]),
+                                depart_times=list(self.depart_times[i]))
+            for i in range(k)
+        }
+
+
+def direct_plans(goals: np.ndarray, names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:
+    """Plans without search: every agent heads straight for its goal."""
+    goals = np.asarray(goals)
+    names = list(names) if names is not None else [f"agent_{i}" for i in range(len(goals))]
+    return {n: AgentPlan(waypoints=goals[:0], goal=goals[i]) for i, n in enumerate(names)}
+
+
+def waypoints_from_paths(paths: Sequence[Sequence[Tuple[int, int]]]) -> Tuple[List[List[int]], List[List[int]], List[int]]:
+    """Split CBS timed paths into (nodes before the goal, their departure times, arrival times).
+
+    A path is ``[(node, time), ...]``; repeated nodes are waits. The departure time from a
+    node is the time of the agent's last entry there before it moves on.
+    """
+    all_nodes, all_depart, arrivals = [], [], []
+    for path in paths:
+        if not path:
+            raise ValueError("empty path")
+        nodes: List[int] = []
+        depart: List[int] = []
+        for node, t in path[:-1]:
+            if nodes and nodes[-1] == node:
+                depart[-1] = int(t)
+            else:
+                nodes.append(int(node))
+                depart.append(int(t))
+        goal, t_end = path[-1]
+        if nodes and nodes[-1] == goal:
+            # the agent reached its goal earlier and waited there: it arrives at that first visit
+            nodes.pop()
+            depart.pop()
+        all_nodes.append(nodes)
+        all_depart.append(depart)
+        arrivals.append(int(t_end))
+    return all_nodes, all_depart, arrivals
+
+
+class BufferPlanner:
+    """Plans waypoints for several agents with CBS on a graph of observations.
+
+    Args:
+        observations: the graph's node observations, ``(N, ...)``.
+        D, C: predicted distance and cost between every pair of nodes, ``(N, N)``.
+        pairwise: ``pairwise(obs_a, obs_b) -> (D, C)`` from the same critics, used to attach
+            start and goal observations (e.g. ``agent.pairwise``).
+        d_max: keep edges with ``D < d_max`` (default 7, the paper's value).
+        c_max: keep edges with ``C < c_max`` (``inf``: distance pruning only, as in SoRB).
+        endpoint_edges: every start keeps at least its this many cheapest outgoing edges and
+            every goal its cheapest incoming ones, whatever ``c_max``.
+        proximity_radius: agents conflict at nodes closer than this (predicted steps, either
+            direction); ``None`` checks only same-node conflicts.
+        time_model: ``"durative"`` (edges take ``ceil(D)`` steps) or ``"unit"`` (the paper's
+            one step per edge).
+        suboptimality: 1 for optimal CBS, ``w > 1`` for ECBS within ``w`` of optimal (default
+            1.1: optimal CBS is often too slow with 20 agents on a dense buffer graph).
+        time_limit: seconds for one CBS call.
+        relax_cost: double ``c_max`` until every agent has a path (otherwise report infeasible).
+    """
+
+    def __init__(
+        self,
+        observations: np.ndarray,
+        D: np.ndarray,
+        C: np.ndarray,
+        pairwise: PairwiseFn,
+        *,
+        d_max: float = 7.0,
+        c_max: float = math.inf,
+        endpoint_edges: int = 3,
+        proximity_radius: Optional[float] = 1.5,
+        time_model: str = "durative",
+        suboptimality: float = 1.1,
+        time_limit: float = 10.0,
+        relax_cost: bool = True,
+    ) -> None:
+        self.observations = np.asarray(observations)
+        n = len(self.observations)
+        self.D = np.asarray(D, dtype=np.float64)
+        self.C = np.asarray(C, dtype=np.float64)
+        for name, m in (("D", self.D), ("C", self.C)):
+            if m.shape != (n, n):
+                raise ValueError(f"{name} must have shape ({n}, {n}) for {n} observations, got {m.shape}")
+            if not np.isfinite(m).all() or (m < 0).any():
+                raise ValueError(f"{name} must be finite and non-negative")
+        if not d_max > 0 or not c_max > 0:
+            raise ValueError(f"d_max and c_max must be > 0, got {d_max!r}, {c_max!r}")
+        if endpoint_edges < 1:
+            raise ValueError(f"endpoint_edges must be >= 1, got {endpoint_edges}")
+        if proximity_radius is not None and not proximity_radius >= 0:
+            raise ValueError(f"proximity_radius must be >= 0 or None, got {proximity_radius!r}")
+        self.pairwise = pairwise
+        self.d_max = float(d_max)
+        self.c_max = float(c_max)
+        self.endpoint_edges = int(endpoint_edges)
+        self.proximity_radius = proximity_radius
+        self.time_model = time_model
+        self.suboptimality = float(suboptimality)
+        self.time_limit = float(time_limit)
+        self.relax_cost = bool(relax_cost)
+        #: node observations of the last problem graph (buffer nodes, starts, goals)
+        self.last_observations: Optional[np.ndarray] = None
+        #: the last problem's dense matrices and pruned graph (for plots and inspection)
+        self.last_D: Optional[np.ndarray] = None
+        self.last_C: Optional[np.ndarray] = None
+        self.last_graph: Optional[WaypointGraph] = None
+
+    @classmethod
+    def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max", **kwargs) -> "BufferPlanner":
+        """Compute ``D`` and ``C`` with ``agent.pairwise`` (ensemble aggregated by ``aggregate``)."""
+        obs = np.asarray(observations)
+
+        def pairwise(a, b):
+            return agent.pairwise(a, b, aggregate=aggregate)
+
+        D, C = pairwise(obs, obs)
+        return cls(obs, D, C, pairwise, **kwargs)
+
+    def with_options(self, **kwargs) -> "BufferPlanner":
+        """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
+        opts = dict(d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
+                    proximity_radius=self.proximity_radius, time_model=self.time_model,
+                    suboptimality=self.suboptimality, time_limit=self.time_limit, relax_cost=self.relax_cost)
+        opts.update(kwargs)
+        return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **opts)
+
+    # ------------------------------------------------------------------ problem graph
+    def problem_matrices(self, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Dense ``(D, C)`` over buffer nodes + starts + goals, and the observations in that order."""
+        starts = np.asarray(starts, dtype=self.observations.dtype)
+        goals = np.asarray(goals, dtype=self.observations.dtype)
+        if starts.shape != goals.shape or starts.shape[1:] != self.observations.shape[1:]:
+            raise ValueError(f"starts {starts.shape} and goals {goals.shape} must both be (K, "
+                             f"{', '.join(map(str, self.observations.shape[1:]))})")
+        for name, x in (("starts", starts), ("goals", goals)):
+            if not np.isfinite(x).all():
+                raise ValueError(f"{name} contain NaN or infinite values")
+        ends = np.concatenate([starts, goals])
+        n, m = len(self.observations), len(ends)
+        d_ne, c_ne = self.pairwise(self.observations, ends)
+        d_en, c_en = self.pairwise(ends, self.observations)
+        d_ee, c_ee = self.pairwise(ends, ends)
+        D = np.empty((n + m, n + m))
+        C = np.empty((n + m, n + m))
+        D[:n, :n], D[:n, n:], D[n:, :n], D[n:, n:] = self.D, d_ne, d_en, d_ee
+        C[:n, :n], C[:n, n:], C[n:, :n], C[n:, n:] = self.C, c_ne, c_en, c_ee
+        return D, C, np.concatenate([self.observations, ends])
+
+    def _edges(self, D: np.ndarray, C: np.ndarray, k: int, c_max: float) -> np.ndarray:
+        """Boolean edge mask of the problem graph for cost cut-off ``c_max``."""
+        n = len(self.observations)
+        keep = (D < self.d_max) & (C < c_max)
+        starts = np.arange(n, n + k)
+        goals = np.arange(n + k, n + 2 * k)
+        # endpoints: a start only leaves (to nodes and its own goal), a goal is only entered
+        keep[:, starts] = False
+        keep[goals, :] = False
+        keep[starts[:, None], goals[None, :]] = False
+        own = (D[starts, goals] < self.d_max) & (C[starts, goals] < c_max)
+        keep[starts, goals] = own
+        e = min(self.endpoint_edges, n)
+        short = D[starts, :n] < self.d_max
+        cheap = np.argsort(np.where(short, C[starts, :n], np.inf), axis=1)[:, :e]
+        rows = np.repeat(starts, e)
+        keep[rows, cheap.ravel()] |= short[np.repeat(np.arange(k), e), cheap.ravel()]
+        short_in = D[:n, goals] < self.d_max
+        cheap_in = np.argsort(np.where(short_in, C[:n, goals], np.inf), axis=0)[:e, :]
+        cols = np.tile(goals, e)
+        keep[cheap_in.ravel(), cols] |= short_in[cheap_in.ravel(), np.tile(np.arange(k), e)]
+        np.fill_diagonal(keep, False)
+        return keep
+
+    def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None) -> MultiAgentPlan:
+        """Plan for agents starting at observations ``starts[i]`` and going to ``goals[i]``.
+
+        ``budget`` (optional) bounds each agent's total predicted cost: every agent's route is
+        first the shortest one within the budget (an exact resource-constrained shortest path;
+        the cheapest route if none fits), and CBS then times the agents on the graph induced by
+        the nodes of those routes.
+        """
+        t0 = time.perf_counter()
+        D, C, obs = self.problem_matrices(starts, goals)
+        k = len(starts)
+        n = len(self.observations)
+        s_ids = list(range(n, n + k))
+        g_ids = list(range(n + k, n + 2 * k))
+        self.last_observations, self.last_D, self.last_C = obs, D, C
+        c_max = self.c_max
+        while True:
+            keep = self._edges(D, C, k, c_max)
+            rows, cols = np.nonzero(keep)
+            dist = sparse.csr_matrix((np.maximum(D[rows, cols], 1e-9), (rows, cols)), shape=D.shape)
+            reach = dijkstra(dist, directed=True, indices=s_ids, unweighted=True)
+            ok = np.isfinite(reach[np.arange(k), g_ids])
+            if ok.all() or not self.relax_cost or not math.isfinite(c_max):
+                break
+            c_max *= 2.0
+        costm = sparse.csr_matrix((np.maximum(C[rows, cols], 1e-12), (rows, cols)), shape=D.shape)
+        graph = WaypointGraph(dist, costm, obs, self.d_max, c_max)
+        self.last_graph = graph
+        if not ok.all():
+            bad = [int(i) for i in np.flatnonzero(~ok)]
+            return MultiAgentPlan("infeasible", c_max=c_max, planning_time=time.perf_counter() - t0,
+                                  message=f"agents {bad} have no path from start to goal in the pruned graph")
+        routes_cost = None
+        if budget is not None:
+            graph, routes_cost = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
+        durations = graph.distance.copy()
+        durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0) if self.time_model == "durative" else np.ones_like(durations.data)
+        prox = Proximity(D, self.proximity_radius) if self.proximity_radius else None
+        res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
+                        suboptimality=self.suboptimality, time_limit=self.time_limit)
+        out = MultiAgentPlan(res.status, soc=res.soc, makespan=res.makespan, c_max=c_max, cbs=res,
+                             message=res.message)
+        if res.solved:
+            out.nodes, out.depart_times, out.arrival_times = waypoints_from_paths(res.paths)
+            out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
+        out.planning_time = time.perf_counter() - t0
+        return out
+
+    @staticmethod
+    def _route_cost(C: np.ndarray, nodes: List[int]) -> float:
+        a, b = np.array(nodes[:-1], dtype=np.int64), np.array(nodes[1:], dtype=np.int64)
+        return float(C[a, b].sum()) if len(a) else 0.0
+
+    def _budget_subgraph(self, graph: WaypointGraph, s_ids, g_ids, budget: float):
+        """The graph induced by the nodes of every agent's shortest route within ``budget``."""
+        nodes = set()
+        costs = []
+        for s, g in zip(s_ids, g_ids):
+            p = risk_bounded_path(graph, s, g, budget)
+            if not p.found:
+                p = shortest_path(graph, s, g, objective="cost")
+            nodes.update(p.nodes)
+            costs.append(p.cost)
+        idx = np.array(sorted(nodes), dtype=np.int64)
+        mask = np.zeros(graph.n_nodes, dtype=bool)
+        mask[idx] = True
+        d = graph.distance.tocoo()
+        keep = mask[d.row] & mask[d.col]
+        n = graph.n_nodes
+        cdata = graph.cost_data()
+        dist = sparse.csr_matrix((d.data[keep], (d.row[keep], d.col[keep])), shape=(n, n))
+        cost = sparse.csr_matrix((cdata[keep], (d.row[keep], d.col[keep])), shape=(n, n))
+        return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max), costs
+
+
+__all__ = ["BufferPlanner", "MultiAgentPlan", "direct_plans", "waypoints_from_paths"]

@@ -1,0 +1,297 @@
+"""The 2D evaluation of "Safe Multi-Agent Navigation guided by Goal-Conditioned Safe Reinforcement Learning".
+
+Protocol (the paper's section Experiments, on ``SafeCentralObstacle-v0``):
+
+- a buffer graph of ``n_nodes`` observations of random free states, annotated by the
+  unconstrained agent's critics and pruned at ``d_max``;
+- problems from the unconstrained critic's predicted distances: each agent's start and goal
+  are graph nodes whose shortest-path distance on the graph is within 20% of a target, the
+  largest finite shortest-path distance divided by 8 (easy), 4 (medium) or 2 (hard), as the
+  paper's code does; starts are pairwise apart (and goals too), so that agents can be placed;
+- every method runs the same problems (fixed seeds); a run succeeds when every agent reaches
+  its goal within ``max_cycles`` (300) steps;
+- per run: success, cumulative cost (largest over agents, as in the paper, and the mean),
+  inter-agent collisions, steps, planning time; aggregated as mean +- std over successful
+  runs and the success rate.
+
+:func:`evaluate` runs a grid of (method, agent count, difficulty) cells and returns per-run
+rows; :func:`aggregate` and :func:`markdown_table` turn them into the paper's Table I.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Optional, Sequence
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import dijkstra
+
+from agents.search.planner import BufferPlanner
+
+from .methods import METHODS, Method, execute
+
+DIFFICULTIES = {"easy": 8.0, "medium": 4.0, "hard": 2.0}
+
+
+@dataclass
+class Problem:
+    """Start and goal positions (world units) of ``K`` agents, chosen from graph nodes."""
+
+    difficulty: str
+    index: int
+    target: float
+    start_nodes: np.ndarray
+    goal_nodes: np.ndarray
+    starts: np.ndarray
+    goals: np.ndarray
+    graph_distance: np.ndarray
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.starts)
+
+
+@dataclass
+class EvaluationSetup:
+    """Everything the methods share: the env id, both agents, the graph nodes and their matrices.
+
+    Build it with :meth:`build`; ``models`` maps ``"unconstrained"``/``"constrained"`` to a
+    :class:`~agents.algorithm.SafeGoalTD3`.
+    """
+
+    env_id: str
+    models: Dict[str, Any]
+    states: np.ndarray
+    observations: np.ndarray
+    D: np.ndarray
+    C: np.ndarray
+    d_max: float = 7.0
+    proximity_radius: float = 1.5
+    suboptimality: float = 1.1
+    cbs_time_limit: float = 10.0
+    shortest: np.ndarray = field(init=False, repr=False)
+    planner: BufferPlanner = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        keep = self.D < self.d_max
+        np.fill_diagonal(keep, False)
+        r, c = np.nonzero(keep)
+        n = len(self.states)
+        g = sparse.csr_matrix((np.maximum(self.D[r, c], 1e-9), (r, c)), shape=(n, n))
+        self.shortest = dijkstra(g, directed=True)
+        unc = self.models["unconstrained"]
+        self.planner = BufferPlanner(
+            self.observations, self.D, self.C, lambda a, b: unc.pairwise(a, b, aggregate="max"),
+            d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
+            time_limit=self.cbs_time_limit)
+
+    @classmethod
+    def build(cls, env_id: str = "SafeCentralObstacle-v0", n_nodes: int = 1000, seed: int = 0,
+              models: Optional[Dict[str, Any]] = None, **kwargs) -> "EvaluationSetup":
+        """Load the shipped checkpoints (unless ``models`` is given) and build the graph's nodes."""
+        import gymnasium as gym
+
+        import safe_mapf_envs  # noqa: F401
+        from agents import load_pretrained
+        from agents.self_sampling import observations_at
+
+        if models is None:
+            models = {k: load_pretrained(env_id, kind=k) for k in ("unconstrained", "constrained")}
+        env = gym.make(env_id)
+        rng = np.random.default_rng(seed)
+        states = env.unwrapped.sample_states(n_nodes, rng)
+        obs = observations_at(env, states)
+        env.close()
+        D, C = models["unconstrained"].pairwise(obs, obs, aggregate="max")
+        return cls(env_id, models, states, obs, np.asarray(D, np.float64), np.asarray(C, np.float64), **kwargs)
+
+    @property
+    def max_finite_distance(self) -> float:
+        """The largest finite shortest-path distance on the graph (the difficulty scale)."""
+        s = self.shortest
+        return float(s[np.isfinite(s)].max())
+
+    def target(self, difficulty: str) -> float:
+        if difficulty not in DIFFICULTIES:
+            raise ValueError(f"unknown difficulty {difficulty!r}; choose from {', '.join(DIFFICULTIES)}")
+        return self.max_finite_distance / DIFFICULTIES[difficulty]
+
+
+def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_problems: int, seed: int = 0,
+                  tolerance: float = 0.2, min_separation: float = 2.5) -> List[Problem]:
+    """``n_problems`` problems of ``n_agents`` agents at a difficulty, reproducible from ``seed``.
+
+    Starts are at least ``min_separation`` units apart and not near each other under the
+    planner's proximity radius (goals likewise), so every agent can be placed and parked.
+    """
+    if n_agents < 1 or n_problems < 1:
+        raise ValueError(f"need n_agents >= 1 and n_problems >= 1, got {n_agents}, {n_problems}")
+    target = setup.target(difficulty)
+    lo, hi = (1 - tolerance) * target, (1 + tolerance) * target
+    sp = setup.shortest
+    ok_pair = (sp >= lo) & (sp <= hi)
+    pos = setup.states
+    near = (setup.D < setup.proximity_radius) | (setup.D.T < setup.proximity_radius)
+    far = (np.linalg.norm(pos[:, None] - pos[None], axis=-1) >= min_separation) & ~near
+    n = len(pos)
+    rng = np.random.default_rng([seed, n_agents, list(DIFFICULTIES).index(difficulty)])
+    problems = []
+    for p in range(n_problems):
+        for _attempt in range(200):
+            free_s = np.ones(n, dtype=bool)
+            free_g = np.ones(n, dtype=bool)
+            s_ids, g_ids = [], []
+            for _ in range(n_agents):
+                cand_s = np.flatnonzero(free_s & ok_pair[:, free_g].any(axis=1))
+                if not len(cand_s):
+                    break
+                s = int(rng.choice(cand_s))
+                cand_g = np.flatnonzero(ok_pair[s] & free_g)
+                g = int(rng.choice(cand_g))
+                s_ids.append(s)
+                g_ids.append(g)
+                free_s &= far[s]
+                free_g &= far[g]
+            if len(s_ids) == n_agents:
+                break
+        else:
+            raise RuntimeError(f"could not place {n_agents} agents for a {difficulty} problem "
+                               f"(target {target:.1f}); use fewer agents or more graph nodes")
+        s_ids, g_ids = np.array(s_ids), np.array(g_ids)
+        problems.append(Problem(difficulty, p, target, s_ids, g_ids, pos[s_ids].copy(), pos[g_ids].copy(),
+                                sp[s_ids, g_ids]))
+    return problems
+
+
+ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
+              "steps", "planning_time", "plan_status", "reached")
+
+
+def evaluate(
+    setup: EvaluationSetup,
+    methods: Sequence[Method],
+    agent_counts: Sequence[int] = (1, 5, 10, 20),
+    difficulties: Sequence[str] = tuple(DIFFICULTIES),
+    n_problems: int = 50,
+    seed: int = 0,
+    max_cycles: int = 300,
+    progress: bool = True,
+    on_run=None,
+) -> List[Dict[str, Any]]:
+    """Run every method on the same problems; one row per (method, agents, difficulty, problem).
+
+    ``on_run(row, problem, execution)`` is called after each run (e.g. to keep trajectories).
+    """
+    import safe_mapf_envs
+
+    cells = [(k, d) for k in agent_counts for d in difficulties]
+    total = len(cells) * n_problems * len(methods)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc="evaluate", unit="run")
+    rows: List[Dict[str, Any]] = []
+    for k, d in cells:
+        problems = make_problems(setup, d, k, n_problems, seed=seed)
+        env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=k, max_cycles=max_cycles)
+        for m in methods:
+            for prob in problems:
+                ex = execute(env, m, setup.models, setup.planner, prob.starts, prob.goals,
+                             seed=seed + prob.index)
+                row = {
+                    "method": m.name, "agents": k, "difficulty": d, "problem": prob.index,
+                    "success": ex.success, "cost_max": float(ex.cost.max()), "cost_mean": float(ex.cost.mean()),
+                    "collisions": ex.collisions, "steps": ex.steps, "planning_time": ex.planning_time,
+                    "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
+                }
+                rows.append(row)
+                if on_run is not None:
+                    on_run(row, prob, ex)
+                if bar is not None:
+                    bar.update(1)
+                    bar.set_postfix_str(f"{m.name} N={k} {d}")
+        env.close()
+    if bar is not None:
+        bar.close()
+    return rows
+
+
+def _mean_std(x: np.ndarray):
+    if not len(x):
+        return math.nan, math.nan
+    return float(np.mean(x)), float(np.std(x))
+
+
+def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
+    """Per (method, agents, difficulty): success rate and mean +- std over successful runs."""
+    groups: Dict[tuple, List[Dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["method"], int(r["agents"]), r["difficulty"]), []).append(r)
+    out = []
+    order = {d: i for i, d in enumerate(DIFFICULTIES)}
+    for (m, k, d), rs in sorted(groups.items(), key=lambda kv: (order.get(kv[0][2], 9), kv[0][1], kv[0][0])):
+        ok = [r for r in rs if _truthy(r["success"])]
+        agg = {"method": m, "agents": k, "difficulty": d, "runs": len(rs), "success_rate": len(ok) / len(rs)}
+        for key in ("cost_max", "cost_mean", "collisions", "steps", "planning_time"):
+            mu, sd = _mean_std(np.array([float(r[key]) for r in ok]))
+            name = "cost" if key == "cost_max" else key
+            agg[f"{name}_mean"], agg[f"{name}_std"] = mu, sd
+        agg["mean_cost_mean"] = agg.pop("cost_mean_mean")
+        agg["mean_cost_std"] = agg.pop("cost_mean_std")
+        out.append(agg)
+    return out
+
+
+def _truthy(v) -> bool:
+    return v in (True, 1, "True", "true", "1")
+
+
+def markdown_table(agg: Sequence[Dict[str, Any]], methods: Optional[Sequence[str]] = None,
+                   value: str = "cost") -> str:
+    """The paper's Table I layout: rows (difficulty, agents), one column per method,
+    cells ``mean +- std (success%)`` of the largest cumulative cost over agents (``value="cost"``)
+    or of another aggregated quantity; the lowest mean per row is bold."""
+    methods = list(methods) if methods is not None else list(dict.fromkeys(a["method"] for a in agg))
+    cell = {(a["difficulty"], a["agents"], a["method"]): a for a in agg}
+    keys = sorted({(a["difficulty"], a["agents"]) for a in agg},
+                  key=lambda x: (list(DIFFICULTIES).index(x[0]) if x[0] in DIFFICULTIES else 9, x[1]))
+    labels = [METHODS[m].label if m in METHODS else m for m in methods]
+    lines = ["| Problem | Agents | " + " | ".join(labels) + " |",
+             "|---|---|" + "---|" * len(methods)]
+    for d, k in keys:
+        vals = [cell.get((d, k, m)) for m in methods]
+        means = [v[f"{value}_mean"] if v is not None and not math.isnan(v[f"{value}_mean"]) else math.inf
+                 for v in vals]
+        best = min(means) if means else math.inf
+        parts = []
+        for v, mu in zip(vals, means):
+            if v is None:
+                parts.append("n/a")
+                continue
+            txt = (f"{v[f'{value}_mean']:.2f} ± {v[f'{value}_std']:.2f}" if math.isfinite(mu) else "-")
+            txt += f" ({100 * v['success_rate']:.0f}%)"
+            parts.append(f"**{txt}**" if math.isfinite(mu) and mu == best and len(methods) > 1 else txt)
+        lines.append(f"| {d.capitalize()} | {k} | " + " | ".join(parts) + " |")
+    return "\n".join(lines)
+
+
+def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
+    """Write rows (per run or aggregated) as CSV with a header."""
+    rows = list(rows)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        if not rows:
+            return
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+__all__ = ["DIFFICULTIES", "EvaluationSetup", "Problem", "ROW_FIELDS", "aggregate", "evaluate", "make_problems",
+           "markdown_table", "write_csv"]
