@@ -36,9 +36,10 @@ def run(args: argparse.Namespace) -> int:
     if args.agents < 1:
         raise ValueError(f"--agents must be >= 1, got {args.agents}")
     inst = load_instance(args.map, args.scen, args.agents)
+    # grid coordinates switch rectangle reasoning on (vanilla CBS ignores them)
     res = solve_cbs(inst.graph, inst.starts, inst.goals, time_limit=args.time_limit,
                     suboptimality=args.suboptimality, node_limit=args.node_limit,
-                    vanilla=args.vanilla, heuristic=args.heuristic)
+                    vanilla=args.vanilla, heuristic=args.heuristic, grid_coords=inst.cells)
     violations = validate(inst.graph, inst.starts, inst.goals, res.paths) if res.solved else None
     out = {
         "map": args.map,

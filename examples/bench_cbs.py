@@ -1,0 +1,183 @@
+"""CBS on the MovingAI MAPF benchmark: solved count, median and worst solve time per map.
+
+Run: ``python examples/bench_cbs.py [--data-dir DIR] [--time-limit 60] [--maps NAME ...]
+[--vanilla | --both] [--sweep [--step 5]] [--out results.csv|results.json]``
+
+Instances are ``(map, scenario, K)``: the first ``K`` agents of a scenario. By default each
+map is run at its largest ``K`` (random-32-32-10: 60, empty-16-16: 30, random-32-32-20: 20,
+maze-32-32-2: 25, room-32-32-4: 30, empty-8-8: 24) on its six scenarios (random-1..5, even-1),
+36 instances in all. ``--sweep`` runs ``K = step, 2 * step, ..., max`` instead (per scenario it
+stops at the first ``K`` that is not solved: larger ``K`` count as unsolved).
+
+The solvers: the default CBS of :mod:`agents.search.cbs` (prioritised conflicts, WDG heuristic,
+rectangle, corridor and target reasoning, bypass; grid coordinates passed) and, with
+``--vanilla`` or ``--both``, the same CBS with those improvements switched off
+(``vanilla=True``). Every solution is checked with :func:`agents.search.validate.validate`
+and must be reported optimal; with ``--both`` the two sums of costs must agree wherever both
+solve. The time of an instance is the wall-clock time of ``solve_cbs`` (instance set-up
+included, file reading excluded); an unsolved instance counts as the time limit in the median
+and makes the worst time read ``>limit``. Everything runs in this one process, one instance
+after the other.
+
+The benchmark files are not part of the repository: ``--data-dir`` (default ``../shared/mapf``
+relative to the repository root) must hold ``maps/<name>.map`` and ``scens/<name>-<scen>.scen``.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import gc
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List, Optional
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from agents.search.cbs import solve_cbs  # noqa: E402
+from agents.search.mapf_grid import load_instance  # noqa: E402
+from agents.search.validate import validate  # noqa: E402
+
+#: map name -> the largest number of agents of the benchmark target
+MAX_AGENTS: Dict[str, int] = {
+    "random-32-32-10": 60,
+    "empty-16-16": 30,
+    "random-32-32-20": 20,
+    "maze-32-32-2": 25,
+    "room-32-32-4": 30,
+    "empty-8-8": 24,
+}
+SCENARIOS = ["random-1", "random-2", "random-3", "random-4", "random-5", "even-1"]
+FIELDS = ["solver", "map", "scen", "agents", "status", "solved", "soc", "lower_bound", "time_s",
+          "hl_expanded", "hl_generated", "ll_calls", "ll_expanded", "valid", "message"]
+
+
+def run_one(data: Path, name: str, scen: str, k: int, solver: str, time_limit: float) -> dict:
+    """Solve one instance and check the answer; a row of the results table."""
+    inst = load_instance(data / "maps" / f"{name}.map", data / "scens" / f"{name}-{scen}.scen", k)
+    gc.collect()
+    t0 = time.perf_counter()
+    if solver == "vanilla":
+        res = solve_cbs(inst.graph, inst.starts, inst.goals, vanilla=True, time_limit=time_limit)
+    else:
+        res = solve_cbs(inst.graph, inst.starts, inst.goals, grid_coords=inst.cells, time_limit=time_limit)
+    elapsed = time.perf_counter() - t0
+    valid = None
+    if res.solved:
+        problems = validate(inst.graph, inst.starts, inst.goals, res.paths)
+        valid = not problems
+        if problems:
+            print(f"  INVALID {solver} {name} {scen} K={k}: {problems[0]}", flush=True)
+    solved = res.status == "optimal" and bool(valid)
+    return {
+        "solver": solver, "map": name, "scen": scen, "agents": k, "status": res.status,
+        "solved": solved, "soc": res.soc, "lower_bound": res.lower_bound, "time_s": round(elapsed, 3),
+        "hl_expanded": res.stats.hl_expanded, "hl_generated": res.stats.hl_generated,
+        "ll_calls": res.stats.ll_calls, "ll_expanded": res.stats.ll_expanded, "valid": valid,
+        "message": res.message,
+    }
+
+
+def summary(rows: List[dict], time_limit: float) -> str:
+    """``solved/total, median and worst time`` of some rows (unsolved count as the limit)."""
+    if not rows:
+        return "no instances"
+    times = [r["time_s"] if r["solved"] else time_limit for r in rows]
+    n_ok = sum(r["solved"] for r in rows)
+    worst = f"{max(times):.2f} s" if n_ok == len(rows) else f">{time_limit:g} s"
+    return f"{n_ok}/{len(rows)} solved, median {statistics.median(times):.2f} s, worst {worst}"
+
+
+def write_out(path: Path, rows: List[dict]) -> None:
+    if path.suffix.lower() == ".json":
+        path.write_text(json.dumps(rows, indent=1))
+    else:
+        with path.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=FIELDS)
+            w.writeheader()
+            w.writerows(rows)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data-dir", type=Path, default=REPO.parent / "shared" / "mapf",
+                    help="folder with maps/ and scens/ (default: ../shared/mapf from the repository root)")
+    ap.add_argument("--time-limit", type=float, default=60.0, metavar="S", help="seconds per instance (default 60)")
+    ap.add_argument("--maps", nargs="+", default=list(MAX_AGENTS), choices=list(MAX_AGENTS), metavar="NAME",
+                    help=f"maps to run (default all: {' '.join(MAX_AGENTS)})")
+    ap.add_argument("--scens", nargs="+", default=SCENARIOS, choices=SCENARIOS, metavar="SCEN",
+                    help="scenarios to run (default all six)")
+    who = ap.add_mutually_exclusive_group()
+    who.add_argument("--vanilla", action="store_true", help="run vanilla CBS (improvements off) only")
+    who.add_argument("--both", action="store_true",
+                     help="run the improved and the vanilla CBS and compare their sums of costs")
+    ap.add_argument("--sweep", action="store_true", help="run K = step..max per scenario instead of K = max only")
+    ap.add_argument("--step", type=int, default=5, help="agent-count step of --sweep (default 5)")
+    ap.add_argument("--out", type=Path, default=None, metavar="FILE", help="write every row as .csv or .json")
+    args = ap.parse_args(argv)
+    data = args.data_dir
+    if not (data / "maps").is_dir() or not (data / "scens").is_dir():
+        ap.error(f"{data} has no maps/ and scens/ folders: pass --data-dir")
+    solvers = ["vanilla"] if args.vanilla else (["cbs", "vanilla"] if args.both else ["cbs"])
+
+    rows: List[dict] = []
+    print(f"CBS on MovingAI, time limit {args.time_limit:g} s per instance, solvers: {', '.join(solvers)}", flush=True)
+    for name in args.maps:
+        kmax = MAX_AGENTS[name]
+        ks = list(range(args.step, kmax, args.step)) + [kmax] if args.sweep else [kmax]
+        for solver in solvers:
+            for scen in args.scens:
+                failed = False
+                for k in ks:
+                    if failed:
+                        row = {f: None for f in FIELDS}
+                        row.update(solver=solver, map=name, scen=scen, agents=k, status="skipped",
+                                   solved=False, time_s=args.time_limit, message="a smaller K was not solved")
+                    else:
+                        row = run_one(data, name, scen, k, solver, args.time_limit)
+                        failed = not row["solved"]
+                        lb = "" if row["solved"] else f" lb {row['lower_bound']}"
+                        print(f"  {solver:7s} {name:16s} {scen:9s} K={k:2d}  {row['status']:8s} soc {row['soc']}{lb}  "
+                              f"{row['time_s']:7.2f} s  hl {row['hl_expanded']}", flush=True)
+                    rows.append(row)
+        for solver in solvers:
+            sel = [r for r in rows if r["map"] == name and r["solver"] == solver]
+            print(f"{name:16s} {solver:7s} {summary(sel, args.time_limit)}", flush=True)
+            if args.sweep:
+                top = [r for r in sel if r["agents"] == kmax]
+                print(f"{'':16s} {solver:7s} at K={kmax}: {summary(top, args.time_limit)}", flush=True)
+
+    mismatches = 0
+    if args.both:
+        solved = {(r["map"], r["scen"], r["agents"]): r["soc"] for r in rows if r["solver"] == "cbs" and r["solved"]}
+        for r in rows:
+            if r["solver"] == "vanilla" and r["solved"]:
+                key = (r["map"], r["scen"], r["agents"])
+                if key in solved and solved[key] != r["soc"]:
+                    mismatches += 1
+                    print(f"SOC MISMATCH {key}: cbs {solved[key]} vanilla {r['soc']}")
+    print("overall:")
+    for solver in solvers:
+        sel = [r for r in rows if r["solver"] == solver]
+        print(f"  {solver:7s} {summary(sel, args.time_limit)}")
+    if args.both:
+        both = sum(1 for r in rows if r["solver"] == "vanilla" and r["solved"]
+                   and solved.get((r["map"], r["scen"], r["agents"])) is not None)
+        print(f"  sums of costs agree on all {both} instances both solve" if not mismatches
+              else f"  {mismatches} sum-of-cost mismatches")
+    invalid = sum(1 for r in rows if r["valid"] is False)
+    if invalid:
+        print(f"  {invalid} INVALID solutions")
+    if args.out:
+        write_out(args.out, rows)
+        print(f"rows written to {args.out}")
+    return 1 if (mismatches or invalid) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
