@@ -194,7 +194,7 @@ def evaluate(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=total, desc="evaluate", unit="run")
+        bar = tqdm(total=total, desc="evaluate", unit="run", mininterval=2.0)
     rows: List[Dict[str, Any]] = []
     for k, d in cells:
         problems = make_problems(setup, d, k, n_problems, seed=seed)

@@ -54,7 +54,7 @@ class Method:
 
 
 #: edge cost cut-off of the constrained search (predicted cumulative cost of one edge)
-DEFAULT_C_MAX = 1.0
+DEFAULT_C_MAX = 0.25
 #: risk budget of ``ours_budget`` (predicted cumulative cost of a whole route)
 DEFAULT_BUDGET = 2.0
 
@@ -92,7 +92,7 @@ class Execution:
     reached: np.ndarray
     cost: np.ndarray
     steps: int
-    collisions: int
+    collisions: int  # contacts between two agents, each counted when it begins
     planning_time: float
     plan_status: str
     trajectories: np.ndarray  # (T + 1, K, 2) positions, for figures
@@ -161,6 +161,7 @@ def execute(
     cost = np.zeros(k)
     reached = np.zeros(k, dtype=bool)
     collisions = 0
+    touching: set = set()
     traj = [env.positions]
     steps = 0
     while env.agents:
@@ -168,15 +169,18 @@ def execute(
         obs, _, term, trunc, infos = env.step(actions)
         steps += 1
         traj.append(env.positions)
+        now = set()
         for a, info in infos.items():
             i = index[a]
             cost[i] += float(info.get("obstacle_cost", info["cost"]))
-            collisions += int(info.get("collisions", 0))
+            now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
             if term.get(a, False):
                 reached[i] = True
+        collisions += len(now - touching)  # a contact counts once, when it begins
+        touching = now
     extra["yields"] = ctrl.stats.yields
     extra["waits"] = ctrl.stats.waits
-    return Execution(bool(reached.all()), reached, cost, steps, collisions // 2, planning_time, status,
+    return Execution(bool(reached.all()), reached, cost, steps, collisions, planning_time, status,
                      np.stack(traj), extra)
 
 
