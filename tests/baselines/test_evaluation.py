@@ -1,0 +1,121 @@
+"""The evaluation harness: problems, execution in the PettingZoo env, aggregation, the table."""
+import math
+
+import numpy as np
+import pytest
+
+import safe_mapf_envs
+from baselines.evaluation import EvaluationSetup, aggregate, evaluate, make_problems, markdown_table, write_csv
+from baselines.methods import METHODS, execute, get_methods
+
+
+@pytest.fixture(scope="module")
+def setup(stand_in_models):
+    import gymnasium as gym
+
+    from agents.self_sampling import observations_at
+
+    env = gym.make("SafeCentralObstacle-v0")
+    states = env.unwrapped.sample_states(250, np.random.default_rng(0))
+    obs = observations_at(env, states)
+    env.close()
+    D, C = stand_in_models["unconstrained"].pairwise(obs, obs)
+    return EvaluationSetup("SafeCentralObstacle-v0", stand_in_models, states, obs, D, C)
+
+
+def test_problems_follow_the_protocol(setup):
+    target = setup.target("medium")
+    assert target == pytest.approx(setup.max_finite_distance / 4)
+    probs = make_problems(setup, "medium", 4, 3, seed=7)
+    again = make_problems(setup, "medium", 4, 3, seed=7)
+    for p, q in zip(probs, again):  # reproducible
+        np.testing.assert_array_equal(p.start_nodes, q.start_nodes)
+        np.testing.assert_array_equal(p.goal_nodes, q.goal_nodes)
+    for p in probs:
+        assert p.n_agents == 4
+        assert ((p.graph_distance >= 0.8 * target) & (p.graph_distance <= 1.2 * target)).all()
+        for pts in (p.starts, p.goals):
+            d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+            assert d[np.triu_indices(4, 1)].min() >= 2.5
+    other = make_problems(setup, "medium", 4, 3, seed=8)
+    assert any((p.start_nodes != q.start_nodes).any() for p, q in zip(probs, other))
+    with pytest.raises(ValueError, match="difficulty"):
+        make_problems(setup, "extreme", 1, 1)
+
+
+def test_search_beats_the_straight_line_past_the_obstacle(setup):
+    """Across the central block, the straight-line policy gets stuck; SoRB+CBS gets through
+    and the cost-pruned search pays less cost than the distance-only one."""
+    env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=2, max_cycles=150)
+    starts = np.array([[4.0, 27.5], [27.5, 4.0]])
+    goals = np.array([[51.0, 27.5], [27.5, 51.0]])
+    direct = execute(env, METHODS["unconstrained_policy"], setup.models, setup.planner, starts, goals)
+    sorb = execute(env, METHODS["sorb"], setup.models, setup.planner, starts, goals)
+    ours = execute(env, METHODS["ours"], setup.models, setup.planner, starts, goals)
+    assert not direct.success
+    assert sorb.success and ours.success
+    assert sorb.plan_status in ("optimal", "suboptimal")
+    assert ours.cost.max() < sorb.cost.max()
+    assert sorb.trajectories.shape == (sorb.steps + 1, 2, 2)
+    env.close()
+
+
+def test_evaluate_aggregate_and_table(setup, tmp_path):
+    rows = evaluate(setup, get_methods(["sorb", "ours"]), agent_counts=[2], difficulties=["easy"],
+                    n_problems=2, progress=False)
+    assert len(rows) == 4
+    assert {r["method"] for r in rows} == {"sorb", "ours"}
+    agg = aggregate(rows)
+    assert len(agg) == 2
+    for a in agg:
+        assert 0.0 <= a["success_rate"] <= 1.0 and a["runs"] == 2
+    write_csv(rows, tmp_path / "runs.csv")
+    assert (tmp_path / "runs.csv").read_text().splitlines()[0].startswith("method,agents,difficulty")
+
+
+def test_aggregate_hand_computed():
+    rows = [
+        {"method": "m", "agents": 5, "difficulty": "easy", "success": True, "cost_max": 1.0, "cost_mean": 0.5,
+         "collisions": 0, "steps": 10, "planning_time": 0.1},
+        {"method": "m", "agents": 5, "difficulty": "easy", "success": True, "cost_max": 3.0, "cost_mean": 1.5,
+         "collisions": 2, "steps": 20, "planning_time": 0.3},
+        {"method": "m", "agents": 5, "difficulty": "easy", "success": False, "cost_max": 99.0, "cost_mean": 9.0,
+         "collisions": 7, "steps": 300, "planning_time": 0.2},
+        {"method": "n", "agents": 5, "difficulty": "easy", "success": False, "cost_max": 5.0, "cost_mean": 5.0,
+         "collisions": 0, "steps": 300, "planning_time": 0.0},
+    ]
+    agg = {a["method"]: a for a in aggregate(rows)}
+    m = agg["m"]
+    assert m["success_rate"] == pytest.approx(2 / 3)
+    assert m["cost_mean"] == pytest.approx(2.0) and m["cost_std"] == pytest.approx(1.0)
+    assert m["mean_cost_mean"] == pytest.approx(1.0)
+    assert m["steps_mean"] == pytest.approx(15.0)
+    assert agg["n"]["success_rate"] == 0 and math.isnan(agg["n"]["cost_mean"])
+    table = markdown_table(list(agg.values()), ["m", "n"])
+    lines = table.splitlines()
+    assert lines[0].startswith("| Problem | Agents | m | n |")
+    assert lines[2] == "| Easy | 5 | **2.00 ± 1.00 (67%)** | - (0%) |"
+
+
+def test_unknown_method_is_named():
+    with pytest.raises(ValueError, match="unknown method 'magic'"):
+        get_methods(["magic"])
+
+
+def test_evaluate_command_with_shipped_checkpoints(tmp_path, capsys):
+    """The CLI end to end on a tiny grid: JSON aggregate rows, CSV and Markdown files."""
+    import json
+
+    from baselines.cli import main
+
+    code = main(["evaluate", "--agents", "2", "--problems", "1", "--difficulty", "easy", "--methods", "sorb",
+                 "ours", "--nodes", "150", "--no-figure", "--json", "--out", str(tmp_path)])
+    assert code == 0
+    agg = json.loads(capsys.readouterr().out)
+    assert {a["method"] for a in agg} == {"sorb", "ours"}
+    for a in agg:
+        assert a["agents"] == 2 and a["difficulty"] == "easy"
+        assert {"success_rate", "cost_mean", "cost_std", "mean_cost_mean"} <= set(a)
+    table = (tmp_path / "table.md").read_text()
+    assert "Constrained Search (Ours, CBS)" in table and "| Easy | 2 |" in table
+    assert (tmp_path / "runs.csv").exists() and (tmp_path / "table.csv").exists()

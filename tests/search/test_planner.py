@@ -1,0 +1,135 @@
+"""BufferPlanner: CBS over a graph of observations with stand-in (exact) distance and cost."""
+import numpy as np
+import pytest
+
+from agents.search.controller import AgentPlan
+from agents.search.mapf_instance import Proximity
+from agents.search.planner import BufferPlanner, direct_plans, waypoints_from_paths
+from agents.search.validate import validate
+
+
+def euclid_pairwise(hot=None, hot_radius=0.0, hot_cost=10.0):
+    """Distance = Euclidean length (>= 1); cost = ``hot_cost`` per unit inside a disc around ``hot``."""
+
+    def pairwise(a, b):
+        a = np.asarray(a, float)[:, None, :]
+        b = np.asarray(b, float)[None, :, :]
+        length = np.linalg.norm(b - a, axis=-1)
+        cost = np.zeros_like(length)
+        if hot is not None:
+            s = np.linspace(0, 1, 11)[:, None, None, None]
+            pts = a[None] + s * (b - a)[None]
+            inside = np.linalg.norm(pts - np.asarray(hot), axis=-1) < hot_radius
+            cost = hot_cost * inside.mean(axis=0) * length
+        return np.maximum(length, 1.0), cost
+
+    return pairwise
+
+
+def grid_points(n=7, spacing=1.0):
+    xs = np.arange(n) * spacing
+    gx, gy = np.meshgrid(xs, xs)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def make_planner(points, pairwise, **kw):
+    D, C = pairwise(points, points)
+    return BufferPlanner(points, D, C, pairwise, **kw)
+
+
+def test_waypoints_from_paths_hand_computed():
+    # waits at node 5 (times 0..2), moves to 7 (arrives 4), leaves at 4, goal 9 at 6
+    paths = [[(5, 0), (5, 1), (5, 2), (7, 4), (9, 6)], [(1, 0), (2, 1), (2, 2), (2, 3), (3, 4)]]
+    nodes, depart, arrive = waypoints_from_paths(paths)
+    assert nodes == [[5, 7], [1, 2]]
+    assert depart == [[2, 4], [0, 3]]
+    assert arrive == [6, 4]
+
+
+def test_two_agents_swap_plan_is_valid_and_timed():
+    pts = grid_points(6)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=1.2, suboptimality=1.0)
+    starts = np.array([[0.0, 2.5], [5.0, 2.5]])
+    goals = starts[::-1].copy()
+    plan = planner.plan(starts, goals)
+    assert plan.status == "optimal"
+    res = plan.cbs
+    dur = planner.last_graph.distance.copy()
+    dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
+    n = len(pts)
+    prox = Proximity(planner.last_D, planner.proximity_radius)
+    assert validate(dur, [n, n + 1], [n + 2, n + 3], res.paths, time_model="durative", proximity=prox) == []
+    # both agents cross the grid: each arrival is at least the straight-line length in steps
+    assert min(plan.arrival_times) >= 5
+    # the controller plans start at the start observation and carry the departure times
+    plans = plan.agent_plans(planner.last_observations, goals)
+    assert set(plans) == {"agent_0", "agent_1"}
+    p0 = plans["agent_0"]
+    assert isinstance(p0, AgentPlan)
+    np.testing.assert_allclose(p0.waypoints[0], starts[0])
+    assert len(p0.depart_times) == len(p0.waypoints)
+    assert list(p0.depart_times) == sorted(p0.depart_times)
+
+
+def test_cost_cutoff_routes_around_a_costly_region():
+    pts = grid_points(9)
+    pw = euclid_pairwise(hot=(4.0, 4.0), hot_radius=2.5)
+    start, goal = np.array([[0.0, 4.0]]), np.array([[8.0, 4.0]])
+    plain = make_planner(pts, pw, d_max=2.5).plan(start, goal)
+    safe_planner = make_planner(pts, pw, d_max=2.5, c_max=0.5)
+    safe = safe_planner.plan(start, goal)
+    assert plain.solved and safe.solved
+    assert safe.predicted_cost[0] < plain.predicted_cost[0]
+    assert safe.predicted_cost[0] == pytest.approx(0.0, abs=1e-6)
+    assert safe.arrival_times[0] > plain.arrival_times[0]  # the detour is longer
+    # no visited node lies inside the costly disc
+    visited = safe_planner.last_observations[safe.nodes[0]]
+    assert (np.linalg.norm(visited - [4.0, 4.0], axis=1) >= 2.5).all()
+
+
+def test_cost_cutoff_is_relaxed_until_every_agent_has_a_path():
+    pts = grid_points(5)
+    pw = euclid_pairwise(hot=(2.0, 2.0), hot_radius=10.0)  # everything is costly
+    start, goal = np.array([[0.0, 0.0]]), np.array([[4.0, 4.0]])
+    plan = make_planner(pts, pw, d_max=1.6, c_max=0.01).plan(start, goal)
+    assert plan.solved and plan.c_max > 0.01
+    strict = make_planner(pts, pw, d_max=1.6, c_max=0.01, relax_cost=False).plan(start, goal)
+    assert strict.status == "infeasible" and not strict.solved
+    assert "no path" in strict.message
+    with pytest.raises(ValueError, match="infeasible"):
+        strict.agent_plans(np.zeros((1, 2)), goal)
+
+
+def test_risk_budget_bounds_the_route_cost():
+    pts = grid_points(9)
+    pw = euclid_pairwise(hot=(4.0, 4.0), hot_radius=2.5)
+    start, goal = np.array([[0.0, 4.0]]), np.array([[8.0, 4.0]])
+    planner = make_planner(pts, pw, d_max=2.5)
+    free = planner.plan(start, goal)
+    bounded = planner.plan(start, goal, budget=1.0)
+    assert free.predicted_cost[0] > 1.0
+    assert bounded.solved and bounded.predicted_cost[0] <= 1.0 + 1e-9
+
+
+def test_bad_inputs_are_named():
+    pts = grid_points(3)
+    pw = euclid_pairwise()
+    D, C = pw(pts, pts)
+    with pytest.raises(ValueError, match="D must have shape"):
+        BufferPlanner(pts, D[:-1], C, pw)
+    bad = D.copy()
+    bad[0, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        BufferPlanner(pts, bad, C, pw)
+    planner = BufferPlanner(pts, D, C, pw)
+    with pytest.raises(ValueError, match="NaN"):
+        planner.plan(np.array([[np.nan, 0.0]]), np.array([[1.0, 1.0]]))
+    with pytest.raises(ValueError, match="starts"):
+        planner.plan(np.zeros((2, 2)), np.zeros((1, 2)))
+
+
+def test_direct_plans_have_no_waypoints():
+    goals = np.array([[0.1, 0.2], [0.3, 0.4]])
+    plans = direct_plans(goals, ["a", "b"])
+    assert len(plans["a"].waypoints) == 0
+    np.testing.assert_allclose(plans["b"].goal, goals[1])
