@@ -1,0 +1,28 @@
+"""Search on the replay buffer: the waypoint graph, single-agent search, CBS and the controller.
+
+Depends on numpy and scipy only (no torch): graphs saved as ``.npz`` can be planned on
+without a critic.
+
+- :class:`WaypointGraph`: observations as nodes, predicted distance and cost on the edges;
+- :func:`shortest_path`, :func:`risk_bounded_path`: single-agent search (SoRB, constrained,
+  weighted, risk-bounded);
+- :func:`solve_cbs`, :class:`CBSSolver`, :func:`validate`: CBS / ECBS on any directed graph and
+  an independent solution checker;
+- :class:`BufferPlanner`: CBS waypoints for many agents on the buffer graph, with learned
+  proximity and durative edges;
+- :class:`WaypointController`: executes the plans in the PettingZoo environment (closed-loop
+  advance, planned departure times, yield rule).
+"""
+from .cbs import CBSResult, CBSSolver, solve_cbs
+from .controller import AgentPlan, WaypointController
+from .graph import WaypointGraph
+from .mapf_instance import MapfInstance, Proximity, integer_durations
+from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+from .single import Plan, risk_bounded_path, shortest_path
+from .validate import validate
+
+__all__ = [
+    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "Proximity",
+    "WaypointController", "WaypointGraph", "direct_plans", "integer_durations", "risk_bounded_path",
+    "shortest_path", "solve_cbs", "validate",
+]

@@ -1,0 +1,63 @@
+"""Benchmark the planning half on the replay-buffer graph of ``SafeCentralObstacle-v0``.
+
+Prints, with the shipped unconstrained checkpoint and one torch thread:
+
+- the time to build the graph for N observations with the full critic ensembles (3 distance
+  + 3 cost critics; D and C for all N^2 pairs, then pruning at d_max = 7);
+- CBS for K agents on that graph (durative edges, learned proximity radius 1.5): median and
+  worst planning time over P problems (hard difficulty), for optimal CBS and for ECBS with
+  w = 1.1 (the planner's default), with the status counts.
+
+Run: ``python examples/bench_buffer_planner.py [--nodes 1000] [--agents 20] [--problems 20]``
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import time
+
+import numpy as np
+import torch
+
+from agents.search.graph import WaypointGraph
+from baselines.evaluation import EvaluationSetup, make_problems
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--nodes", type=int, default=1000)
+    ap.add_argument("--agents", type=int, default=20)
+    ap.add_argument("--problems", type=int, default=20)
+    ap.add_argument("--difficulty", default="hard")
+    ap.add_argument("--time-limit", type=float, default=10.0)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+
+    setup = EvaluationSetup.build(n_nodes=args.nodes, seed=args.seed)
+    agent = setup.models["unconstrained"]
+    builds = []
+    for _ in range(3):
+        t = time.perf_counter()
+        graph = WaypointGraph.from_agent(agent, setup.observations, d_max=7.0)
+        builds.append(time.perf_counter() - t)
+    print(f"graph build, N={args.nodes}: {min(builds):.2f} s (best of 3; {graph.n_edges} edges, "
+          f"{graph.n_edges / args.nodes:.0f} per node)")
+
+    problems = make_problems(setup, args.difficulty, args.agents, args.problems, seed=args.seed)
+    for w in (1.0, 1.1):
+        planner = setup.planner.with_options(suboptimality=w, time_limit=args.time_limit)
+        times, status = [], collections.Counter()
+        for p in problems:
+            starts = setup.observations[p.start_nodes]
+            goals = setup.observations[p.goal_nodes]
+            plan = planner.plan(starts, goals)
+            times.append(plan.planning_time)
+            status[plan.status] += 1
+        name = "optimal CBS" if w == 1.0 else f"ECBS w={w}"
+        print(f"{name}, {args.agents} agents, {args.difficulty}: median {np.median(times):.2f} s, "
+              f"worst {max(times):.2f} s (limit {args.time_limit:g} s), {dict(status)}")
+
+
+if __name__ == "__main__":
+    main()
