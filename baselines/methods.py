@@ -40,6 +40,8 @@ class Method:
         search: plan waypoints with CBS on the buffer graph (``False``: straight to the goal).
         c_max: cost cut-off of the graph's edges (``inf``: distance pruning only).
         budget: optional per-agent bound on the total predicted cost of a route.
+        hold: where an early agent waits for its planned departure time: ``"all"`` waypoints
+            or only where the plan ``"waits"``.
     """
 
     name: str
@@ -48,6 +50,7 @@ class Method:
     search: bool
     c_max: float = math.inf
     budget: Optional[float] = None
+    hold: str = "waits"
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -128,11 +131,13 @@ def execute(
     seed: int = 0,
     reach_threshold: float = 2.0,
     safety_radius: float = 2.0,
+    hold: Optional[str] = None,
 ) -> Execution:
     """Run ``method`` from positions ``starts`` to ``goals`` in the parallel env ``env``.
 
     Positions only place the agents (the environment's reset); the planner and the agents
     see observations. The run ends when every agent is at its goal or at ``env.max_cycles``.
+    ``hold`` overrides the method's (see :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`).
     """
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -150,7 +155,7 @@ def execute(
         status = plan.status
         extra = {"c_max_used": plan.c_max, "soc": plan.soc, "waypoints": [len(x) for x in plan.nodes],
                  "predicted_cost": plan.predicted_cost, "nodes": plan.nodes}
-        plans = plan.agent_plans(p.last_observations, g, names) if plan.solved else direct_plans(g, names)
+        plans = plan.agent_plans(p.last_observations, g, names, hold=hold or method.hold) if plan.solved else direct_plans(g, names)
     else:
         plans = direct_plans(g, names)
     planning_time = time.perf_counter() - t0

@@ -56,6 +56,8 @@ from .cbs_lowlevel import (
     focal_search,
     mdds_dependent,
     pair_conflicts,
+    prune_mdd,
+    satisfies,
     space_time_astar,
 )
 from .constraints import (
@@ -94,6 +96,8 @@ __all__ = [
 STATUSES = ("optimal", "suboptimal", "timeout", "infeasible")
 HEURISTICS = ("none", "cg", "dg", "wdg")
 _INF = 1 << 50
+#: how many constraint-set ancestors are searched for an MDD or pair result to reuse
+_ANCESTORS = 8
 
 
 # ---------------------------------------------------------------------------------- results
@@ -108,6 +112,7 @@ class CBSStats:
     runtime_s: float = 0.0
     mdds: int = 0
     pair_searches: int = 0
+    pair_reuses: int = 0
     bypasses: int = 0
 
 
@@ -247,6 +252,8 @@ class _Context:
         self.counter = Counter()
         self.mdds: Dict[Tuple[int, int], MDD] = {}
         self.pairs: Dict[Tuple[int, int, int, int], int] = {}
+        #: pair key -> (optimal cost, the two paths) of solved pair sub-problems (unit time)
+        self.pair_solutions: Dict[Tuple[int, int, int, int], Tuple[int, AgentPath, AgentPath]] = {}
         self.dependent: Dict[Tuple[int, int, int, int], bool] = {}
         self.arrivals: Dict[Tuple[int, int, int, Optional[int]], int] = {}
         self.compiled: Dict[Tuple[int, int], object] = {}
@@ -441,15 +448,29 @@ class _CBS:
         gid = self.agents[i]
         cons = node.cons[i]
         key = (gid, cons.key)
-        m = self.ctx.mdds.get(key)
+        ctx = self.ctx
+        m = ctx.mdds.get(key)
         if m is None:
-            self.ctx.check_time()
-            cc = self.ctx.compile(gid, cons)
-            m = build_mdd(self.inst, gid, cc, node.paths[i].cost)
-            self.ctx.stats.mdds += 1
-            if len(self.ctx.mdds) > 50_000:
-                self.ctx.mdds.clear()
-            self.ctx.mdds[key] = m
+            ctx.check_time()
+            cc = ctx.compile(gid, cons)
+            cost = node.paths[i].cost
+            if self.inst.unit:
+                # an ancestor constraint set's MDD of the same cost, pruned, is this one
+                anc = cons.parent
+                for _ in range(_ANCESTORS):
+                    if anc is None:
+                        break
+                    old = ctx.mdds.get((gid, anc.key))
+                    if old is not None and old.cost == cost:
+                        m = prune_mdd(old, cc)
+                        break
+                    anc = anc.parent
+            if m is None:
+                m = build_mdd(self.inst, gid, cc, cost)
+            ctx.stats.mdds += 1
+            if len(ctx.mdds) > 50_000:
+                ctx.mdds.clear()
+            ctx.mdds[key] = m
         return m
 
     def _raises_cost(self, node: CTNode, i: int, constraints) -> bool:
@@ -585,13 +606,43 @@ class _CBS:
             self.ctx.dependent[key] = dep
         return dep
 
+    def _pair_known(self, node: CTNode, i: int, j: int) -> Optional[int]:
+        """The optimal cost of the pair (i, j) alone under the node's constraints, if known
+        without a search: memoised, or (unit time) the optimum of the pair under an ancestor
+        constraint set of one of the two agents whose solution meets the constraints added since
+        (more constraints cannot make the pair cheaper, and that solution is still allowed)."""
+        ctx = self.ctx
+        gi, gj = self.agents[i], self.agents[j]
+        ci, cj = node.cons[i], node.cons[j]
+        val = ctx.pairs.get((gi, gj, ci.key, cj.key))
+        if val is not None or not self.inst.unit:
+            return val
+        for side in (0, 1):
+            cur = ci if side == 0 else cj
+            walked = []
+            for _ in range(_ANCESTORS):
+                if cur.parent is None:
+                    break
+                walked.append(cur.constraint)
+                cur = cur.parent
+                key = (gi, gj, cur.key, cj.key) if side == 0 else (gi, gj, ci.key, cur.key)
+                sol = ctx.pair_solutions.get(key)
+                if sol is not None:
+                    total, pi, pj = sol
+                    p = pi if side == 0 else pj
+                    if all(satisfies(p, c) for c in walked):
+                        ctx.pairs[(gi, gj, ci.key, cj.key)] = total
+                        ctx.stats.pair_reuses += 1
+                        return total
+        return None
+
     def _pair_weight(self, node: CTNode, i: int, j: int) -> int:
         """Extra cost the pair (i, j) needs beyond their individual optima (memoised)."""
         ctx = self.ctx
         gi, gj = self.agents[i], self.agents[j]
         ci, cj = node.cons[i], node.cons[j]
         key = (gi, gj, ci.key, cj.key)
-        val = ctx.pairs.get(key)
+        val = self._pair_known(node, i, j)
         if val is None:
             ctx.stats.pair_searches += 1
             sub = _CBS(ctx, [gi, gj], [ci, cj], heuristic="cg", prioritize=True, bypass=True,
@@ -600,6 +651,10 @@ class _CBS:
             status, best = sub.run()
             if status == "solved":
                 total = best.g
+                if self.inst.unit:
+                    if len(ctx.pair_solutions) > 200_000:
+                        ctx.pair_solutions.clear()
+                    ctx.pair_solutions[key] = (total, best.paths[0], best.paths[1])
             elif status == "infeasible":
                 total = _INF
             else:
@@ -623,16 +678,19 @@ class _CBS:
                 if card:
                     edges[(i, j)] = 1
                 continue
-            dep = card
-            if not dep and unit:
-                dep = self._dependent(node, i, j)
-            if self.heuristic == "dg":
-                if dep:
-                    edges[(i, j)] = 1
-                continue
-            if not dep and unit:
-                continue
-            w = self._pair_weight(node, i, j)
+            if self.heuristic == "wdg" and self._pair_known(node, i, j) is not None:
+                w = self._pair_weight(node, i, j)  # no search: known already
+            else:
+                dep = card
+                if not dep and unit:
+                    dep = self._dependent(node, i, j)
+                if self.heuristic == "dg":
+                    if dep:
+                        edges[(i, j)] = 1
+                    continue
+                if not dep and unit:
+                    continue
+                w = self._pair_weight(node, i, j)
             if w >= _INF:
                 return _INF
             if w > 0:

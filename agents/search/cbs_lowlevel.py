@@ -23,7 +23,18 @@ import heapq
 import time as _time
 from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
 
-from .constraints import EDGE, PROXIMITY, TARGET, VERTEX, CompiledConstraints, Conflict
+from .constraints import (
+    EDGE,
+    PROXIMITY,
+    TARGET,
+    VERTEX,
+    CompiledConstraints,
+    Conflict,
+    EdgeConstraint,
+    LengthConstraint,
+    RangeConstraint,
+    VertexConstraint,
+)
 from .mapf_instance import UNREACHABLE, MapfInstance
 
 
@@ -257,6 +268,34 @@ def _landmarks(inst: MapfInstance, agent: int, cc: CompiledConstraints) -> Dict[
     return lm
 
 
+_NO_FOREVER: Tuple[int, Optional[List[int]], Optional[List[int]]] = (1 << 62, None, None)
+
+
+def _forever_h(inst: MapfInstance, agent: int, cc: CompiledConstraints):
+    """Unit time: ``(TF, hF, late)`` for the "never again" constraints of ``cc`` (cached on ``cc``).
+
+    From time ``TF`` on every such node is closed for good, and ``hF`` holds the distances to the
+    goal avoiding them. ``late[v]`` is the last time at which being at ``v`` can still lead to the
+    goal: from a node that reaches the goal only through a closed node ``x``, the last visit to
+    such a node must come before it closes, so ``t + dist(v, x) <= fw(x) - 1`` for some ``x``.
+    """
+    if not cc.forever:
+        return _NO_FOREVER
+    out = getattr(cc, "_forever_h", None)
+    if out is None:
+        F = cc.forever
+        hF = inst.dist_to(inst.goals[agent], frozenset(F))
+        late = [UNREACHABLE] * inst.n_nodes
+        cut = [v for v in range(inst.n_nodes) if hF[v] >= UNREACHABLE]
+        if cut:
+            to_x = [(fw - 1, inst.dist_to(x)) for x, fw in F.items()]
+            for v in cut:
+                late[v] = max(lim - d[v] for lim, d in to_x)
+        out = (max(F.values()), hF, late)
+        cc._forever_h = out
+    return out
+
+
 def _reconstruct(code: int, parent: Dict[int, int], tclose: Dict[int, int], N: int) -> List[Tuple[int, int]]:
     out = []
     while code >= 0:
@@ -317,6 +356,8 @@ def space_time_astar(
     lm = _landmarks(inst, agent, cc) if cc.ranges else None
     hs = _hstart(hs, gl, lm, s)
     L = _horizon(cc, res)
+    if inst.unit:
+        return _astar_unit(inst, agent, cc, res, deadline, counter, hs, gl, lm, L)
     expand = make_expander(inst, cc, res)
     heap = [(hs, 0, hs, s)]
     best = {s: hs << 24}
@@ -363,6 +404,114 @@ def space_time_astar(
             best[ncode] = pk
             parent[ncode] = code
             push(heap, (nf, nc, hw, ncode))
+    counter.expanded += pops
+    return None
+
+
+def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Optional[Reservation],
+                deadline: float, counter: Counter, hs: int, gl: int, lm, L: int) -> Optional[List[Tuple[int, int]]]:
+    """:func:`space_time_astar` under unit time, with the successor generation inlined.
+
+    Open entries are single integers ``((f * B + conflicts) * B + h) * M + code`` (``B`` and
+    ``M`` bound the fields), so the heap compares plain integers: the order is the same as
+    ``(f, conflicts, h, code)`` tuples.
+    """
+    N = inst.n_nodes
+    h = inst.h[agent]
+    s, g = inst.starts[agent], inst.goals[agent]
+    goal_min = cc.goal_min
+    vset, eset, forever = cc.vset, cc.eset, cc.forever
+    occ, moves, parked = (res.occ, res.moves, res.parked) if res is not None else _EMPTY_RES_SETS
+    succ = inst.succ
+    M = (L + 1) * N
+    B = 1 << 20
+    BM = B * M
+    BBM = B * BM
+    # from the time every "never again" constraint holds on, the agent moves in the graph without
+    # those nodes: its distances there are a stronger admissible heuristic, and infinite where
+    # the goal is cut off (which proves infeasibility without sweeping the whole horizon)
+    TF, hF, late = _forever_h(inst, agent, cc)
+    if late is not None and late[s] < 0:
+        return None
+    heap = [(hs * B + 0) * BM + hs * M + s]
+    best = {s: hs << 24}
+    parent = {s: -1}
+    tclose: Dict[int, int] = {}
+    pops = 0
+    pop = heapq.heappop
+    push = heapq.heappush
+    LN = L * N
+    while heap:
+        key = pop(heap)
+        code = key % M
+        if code in tclose:
+            continue
+        rest = key // M
+        hh = rest % B
+        rest //= B
+        c = rest % B
+        t = rest // B - hh
+        tclose[code] = t
+        v = code % N
+        if v == g and t > goal_min:
+            counter.expanded += pops
+            return _reconstruct(code, parent, tclose, N)
+        pops += 1
+        if not pops & 1023 and _time.perf_counter() > deadline:
+            counter.expanded += pops
+            raise SearchTimeout
+        nt = t + 1
+        vbase = nt * N
+        base = vbase if nt < L else LN
+        tv = t * N + v
+        src = tv * N
+        for w in succ[v]:
+            hw = h[w]
+            if hw >= UNREACHABLE:
+                continue
+            vc = vbase + w
+            if vc in vset:
+                continue
+            if w != v:
+                if (src + w) in eset:
+                    continue
+                dc = 1 if ((t * N + w) * N + v) in moves else 0
+            else:
+                dc = 0
+            if forever:
+                fw = forever.get(w)
+                if (fw is not None and nt >= fw) or nt > late[w]:
+                    continue
+            if vc in occ:
+                dc += 1
+            if parked:
+                pt = parked.get(w)
+                if pt is not None and nt >= pt:
+                    dc += 1
+            if nt >= TF:
+                hw = hF[w]
+                if hw >= UNREACHABLE:
+                    continue
+            if nt + hw < gl:
+                hw = gl - nt
+            if lm is not None:
+                lst = lm.get(w)
+                if lst is not None:
+                    for lo, hi, bound in lst:
+                        if lo <= nt <= hi and nt + hw < bound:
+                            hw = bound - nt
+            ncode = base + w
+            if ncode in tclose:
+                continue
+            nc = c + dc
+            nf = nt + hw
+            pk = (nf << 24) | nc
+            old = best.get(ncode)
+            if old is not None and old <= pk:
+                continue
+            best[ncode] = pk
+            parent[ncode] = code
+            push(heap, nf * BBM + nc * BM + hw * M + ncode)
     counter.expanded += pops
     return None
 
@@ -530,7 +679,7 @@ class MDD:
     kept transitions ``(v, t, w, t2)``.
     """
 
-    __slots__ = ("cost", "edges", "levels", "must", "children", "start", "goal", "N", "_singles")
+    __slots__ = ("cost", "edges", "levels", "must", "children", "start", "goal", "N", "_singles", "_kids")
 
     def __init__(self, cost: int, edges: List[Tuple[int, int, int, int]], start: int, goal: int, N: int, unit: bool):
         self.cost = cost
@@ -539,6 +688,7 @@ class MDD:
         self.goal = goal
         self.N = N
         self._singles: Optional[List[Tuple[int, int]]] = None
+        self._kids: Optional[Dict[int, List[int]]] = None
         levels: List[Set[int]] = [set() for _ in range(cost + 1)]
         levels[0].add(start)
         levels[cost].add(goal)
@@ -593,6 +743,13 @@ class MDD:
                 stack.append(nxt)
         return False
 
+    def kids(self) -> Dict[int, List[int]]:
+        """State code ``t * N + v`` -> the nodes of its children (built on first use)."""
+        if self._kids is None:
+            N = self.N
+            self._kids = {code: [c % N for c in lst] for code, lst in self.children.items()}
+        return self._kids
+
     def singletons(self) -> List[Tuple[int, int]]:
         """``(time, node)`` of every level with a single node (unit time)."""
         if self._singles is None:
@@ -605,21 +762,46 @@ def build_mdd(inst: MapfInstance, agent: int, cc: CompiledConstraints, cost: int
     N = inst.n_nodes
     h = inst.h[agent]
     s, g = inst.starts[agent], inst.goals[agent]
-    expand = make_expander(inst, cc, None)
-    layers: Dict[int, Set[int]] = {0: {s}}
     fwd: List[Tuple[int, int, int, int]] = []
-    for t in range(cost):
-        nodes = layers.get(t)
-        if not nodes:
-            continue
-        for v in sorted(nodes):
-            for w, nt, _ in expand(v, t):
-                if nt > cost or nt + h[w] > cost:
-                    continue
-                if nt == cost and w != g:
-                    continue
-                layers.setdefault(nt, set()).add(w)
-                fwd.append((v, t, w, nt))
+    if inst.unit:
+        vset, eset, forever = cc.vset, cc.eset, cc.forever
+        succ = inst.succ
+        layer: Set[int] = {s}
+        for t in range(cost):
+            nt = t + 1
+            vb = nt * N
+            rem = cost - nt
+            nxt: Set[int] = set()
+            last = nt == cost
+            for v in sorted(layer):
+                src = (t * N + v) * N
+                for w in succ[v]:
+                    if h[w] > rem or (last and w != g) or (vb + w) in vset:
+                        continue
+                    if w != v and (src + w) in eset:
+                        continue
+                    if forever:
+                        fw = forever.get(w)
+                        if fw is not None and nt >= fw:
+                            continue
+                    nxt.add(w)
+                    fwd.append((v, t, w, nt))
+            layer = nxt
+    else:
+        expand = make_expander(inst, cc, None)
+        layers: Dict[int, Set[int]] = {0: {s}}
+        for t in range(cost):
+            nodes = layers.get(t)
+            if not nodes:
+                continue
+            for v in sorted(nodes):
+                for w, nt, _ in expand(v, t):
+                    if nt > cost or nt + h[w] > cost:
+                        continue
+                    if nt == cost and w != g:
+                        continue
+                    layers.setdefault(nt, set()).add(w)
+                    fwd.append((v, t, w, nt))
     alive = {cost * N + g}
     kept = []
     for v, t, w, nt in reversed(fwd):
@@ -630,6 +812,67 @@ def build_mdd(inst: MapfInstance, agent: int, cc: CompiledConstraints, cost: int
     return MDD(cost, kept, s, g, N, inst.unit)
 
 
+def prune_mdd(m: MDD, cc: CompiledConstraints) -> Optional[MDD]:
+    """Unit time: the MDD of the same agent and cost under constraints ``cc`` that include the
+    ones ``m`` was built under (``None`` if no path of that cost is left).
+
+    Every path of cost ``m.cost`` that meets ``cc`` meets the older constraints too, so it is a
+    path of ``m``: dropping the edges ``cc`` forbids and trimming what no longer joins the start
+    to the goal gives exactly the MDD :func:`build_mdd` would build, at a fraction of the work.
+    """
+    N = m.N
+    vset, eset, forever = cc.vset, cc.eset, cc.forever
+    alive = {m.start}
+    fwd = []
+    for e in m.edges:  # in order of time
+        v, t, w, t2 = e
+        if t * N + v not in alive or (t2 * N + w) in vset:
+            continue
+        if w != v and ((t * N + v) * N + w) in eset:
+            continue
+        if forever:
+            fw = forever.get(w)
+            if fw is not None and t2 >= fw:
+                continue
+        alive.add(t2 * N + w)
+        fwd.append(e)
+    target = m.cost * N + m.goal
+    if target not in alive:
+        return None
+    back = {target}
+    kept = []
+    for e in reversed(fwd):
+        v, t, w, t2 = e
+        if t2 * N + w in back:
+            back.add(t * N + v)
+            kept.append(e)
+    kept.reverse()
+    return MDD(m.cost, kept, m.start, m.goal, N, True)
+
+
+def satisfies(path: "AgentPath", c) -> bool:
+    """Unit time: whether a path (parked at its goal after its arrival) meets constraint ``c``."""
+    T = path.cost
+    steps = path.steps
+    if isinstance(c, VertexConstraint):
+        return (steps[c.time] if c.time < T else path.goal) != c.node
+    if isinstance(c, EdgeConstraint):
+        t = c.time
+        if t >= T:
+            return True
+        return not (steps[t] == c.u and steps[t + 1] == c.v)
+    if isinstance(c, RangeConstraint):
+        if c.node == path.goal and c.end >= T and c.end >= c.start:
+            return False
+        for t in range(c.start, min(c.end, T - 1) + 1):
+            if steps[t] == c.node:
+                return False
+        return True
+    if isinstance(c, LengthConstraint):
+        return T > c.time
+    raise TypeError(f"unknown constraint {c!r}")
+
+
 def mdds_dependent(m1: MDD, m2: MDD, near_mat=None) -> bool:
     """Unit time: True if no pair of optimal paths (one from each MDD) is conflict-free.
 
@@ -638,23 +881,20 @@ def mdds_dependent(m1: MDD, m2: MDD, near_mat=None) -> bool:
     """
     N = m1.N
     T = max(m1.cost, m2.cost)
+    k1, k2 = m1.kids(), m2.kids()
+    c1, c2 = m1.cost, m2.cost
+    g1, g2 = (m1.goal,), (m2.goal,)
     cur = {(m1.start, m2.start)}
-
-    def nexts(m: MDD, v: int, t: int) -> List[int]:
-        if t >= m.cost:
-            return [m.goal]
-        return [c % N for c in m.children.get(t * N + v, ())]
-
+    empty = ()
     for t in range(T):
         nxt = set()
+        tN = t * N
         for a, b in cur:
-            na = nexts(m1, a, t)
-            nb = nexts(m2, b, t)
+            na = k1.get(tN + a, empty) if t < c1 else g1
+            nb = k2.get(tN + b, empty) if t < c2 else g2
             for x in na:
                 for y in nb:
-                    if x == y:
-                        continue
-                    if x == b and y == a:
+                    if x == y or (x == b and y == a):
                         continue
                     if near_mat is not None and near_mat[x, y]:
                         continue

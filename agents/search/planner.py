@@ -18,9 +18,11 @@ and the :class:`~agents.search.controller.WaypointController`:
 5. :meth:`MultiAgentPlan.agent_plans` turns the paths into per-agent waypoint observations
    and departure times for the controller.
 
-If the cost-pruned graph leaves some agent without any path, ``c_max`` is doubled until every
-agent has one (``MultiAgentPlan.c_max`` reports the value used); with ``relax_cost=False``
-the plan is ``"infeasible"`` instead.
+If the cost-pruned graph leaves some agent without any path, the cut-off is relaxed around
+that agent's start and goal only (doubling until a path exists; ``MultiAgentPlan.c_max``
+reports the largest value used), so the rest of the graph stays as safe as asked; with
+``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
+call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -55,6 +57,7 @@ class MultiAgentPlan:
         nodes: per agent, the node ids it visits in order, start included, goal excluded
             (ids of the problem graph: ``0..N-1`` buffer nodes, then starts, then goals).
         depart_times: per agent, the plan time at which it leaves each node of ``nodes``.
+        node_arrivals: per agent, the plan time at which it gets to each node of ``nodes``.
         arrival_times: per agent, the plan time of its final arrival at its goal.
         soc: sum of arrival times; ``makespan``: the latest one.
         c_max: the cost cut-off used (larger than asked if it had to be relaxed).
@@ -66,6 +69,7 @@ class MultiAgentPlan:
     status: str
     nodes: List[List[int]] = field(default_factory=list)
     depart_times: List[List[int]] = field(default_factory=list)
+    node_arrivals: List[List[int]] = field(default_factory=list)
     arrival_times: List[int] = field(default_factory=list)
     soc: Optional[int] = None
     makespan: Optional[int] = None
@@ -80,8 +84,14 @@ class MultiAgentPlan:
         return bool(self.nodes)
 
     def agent_plans(self, node_observations: np.ndarray, goals: np.ndarray,
-                    names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:
+                    names: Optional[Sequence[str]] = None, hold: str = "all") -> Dict[str, AgentPlan]:
         """Controller plans: waypoint observations (start node included) and departure times.
+
+        ``hold`` says where an agent that is early must wait for its planned departure time:
+        ``"all"`` (every waypoint: plan time is environment time) or ``"waits"`` (only where
+        the plan itself waits, i.e. where CBS delayed the agent to let another one pass; edge
+        durations are pessimistic predictions, so holding everywhere mostly means standing
+        still, which costs where the cost field is not zero).
 
         Args:
             node_observations: observations of the problem graph's nodes, indexed by node id
@@ -95,12 +105,17 @@ class MultiAgentPlan:
         names = list(names) if names is not None else [f"agent_{i}" for i in range(k)]
         if len(names) != k or len(goals) != k:
             raise ValueError(f"{k} planned agents but {len(names)} names and {len(goals)} goals")
+        if hold not in ("all", "waits"):
+            raise ValueError(f"hold must be 'all' or 'waits', got {hold!r}")
         obs = np.asarray(node_observations)
-        return {
-            names[i]: AgentPlan(waypoints=obs[np.asarray(self.nodes[i], dtype=np.int64)], goal=np.asarray(goals[i]),
-                                depart_times=list(self.depart_times[i]))
-            for i in range(k)
-        }
+        out = {}
+        for i in range(k):
+            depart = list(self.depart_times[i])
+            if hold == "waits":
+                depart = [d if d > a else 0 for d, a in zip(depart, self.node_arrivals[i])]
+            out[names[i]] = AgentPlan(waypoints=obs[np.asarray(self.nodes[i], dtype=np.int64)],
+                                      goal=np.asarray(goals[i]), depart_times=depart)
+        return out
 
 
 def direct_plans(goals: np.ndarray, names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:
@@ -110,33 +125,39 @@ def direct_plans(goals: np.ndarray, names: Optional[Sequence[str]] = None) -> Di
     return {n: AgentPlan(waypoints=goals[:0], goal=goals[i]) for i, n in enumerate(names)}
 
 
-def waypoints_from_paths(paths: Sequence[Sequence[Tuple[int, int]]]) -> Tuple[List[List[int]], List[List[int]], List[int]]:
-    """Split CBS timed paths into (nodes before the goal, their departure times, arrival times).
+def waypoints_from_paths(paths: Sequence[Sequence[Tuple[int, int]]]):
+    """Split CBS timed paths into per-agent waypoints.
 
-    A path is ``[(node, time), ...]``; repeated nodes are waits. The departure time from a
-    node is the time of the agent's last entry there before it moves on.
+    A path is ``[(node, time), ...]``; repeated nodes are waits. Returns ``(nodes,
+    depart_times, node_arrivals, arrivals)``: per agent the nodes before the goal, the time it
+    leaves each (its last entry there), the time it gets to each (its first entry) and the time
+    of its final arrival at the goal.
     """
-    all_nodes, all_depart, arrivals = [], [], []
+    all_nodes, all_depart, all_arrive, arrivals = [], [], [], []
     for path in paths:
         if not path:
             raise ValueError("empty path")
         nodes: List[int] = []
         depart: List[int] = []
+        arrive: List[int] = []
         for node, t in path[:-1]:
             if nodes and nodes[-1] == node:
                 depart[-1] = int(t)
             else:
                 nodes.append(int(node))
                 depart.append(int(t))
+                arrive.append(int(t))
         goal, t_end = path[-1]
         if nodes and nodes[-1] == goal:
             # the agent reached its goal earlier and waited there: it arrives at that first visit
             nodes.pop()
             depart.pop()
+            arrive.pop()
         all_nodes.append(nodes)
         all_depart.append(depart)
+        all_arrive.append(arrive)
         arrivals.append(int(t_end))
-    return all_nodes, all_depart, arrivals
+    return all_nodes, all_depart, all_arrive, arrivals
 
 
 class BufferPlanner:
@@ -158,7 +179,10 @@ class BufferPlanner:
         suboptimality: 1 for optimal CBS, ``w > 1`` for ECBS within ``w`` of optimal (default
             1.1: optimal CBS is often too slow with 20 agents on a dense buffer graph).
         time_limit: seconds for one CBS call.
-        relax_cost: double ``c_max`` until every agent has a path (otherwise report infeasible).
+        relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
+            infeasible); see :meth:`_connect`.
+        fallback_suboptimality: if CBS runs out of time, one more try with this (larger)
+            suboptimality bound and the same time limit (``None``: no second try).
     """
 
     def __init__(
@@ -174,8 +198,9 @@ class BufferPlanner:
         proximity_radius: Optional[float] = 1.5,
         time_model: str = "durative",
         suboptimality: float = 1.1,
-        time_limit: float = 10.0,
+        time_limit: float = 5.0,
         relax_cost: bool = True,
+        fallback_suboptimality: Optional[float] = 2.0,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -201,6 +226,9 @@ class BufferPlanner:
         self.suboptimality = float(suboptimality)
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
+        if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
+            raise ValueError(f"fallback_suboptimality must be >= 1 or None, got {fallback_suboptimality!r}")
+        self.fallback_suboptimality = fallback_suboptimality
         #: node observations of the last problem graph (buffer nodes, starts, goals)
         self.last_observations: Optional[np.ndarray] = None
         #: the last problem's dense matrices and pruned graph (for plots and inspection)
@@ -223,7 +251,8 @@ class BufferPlanner:
         """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
         opts = dict(d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                     proximity_radius=self.proximity_radius, time_model=self.time_model,
-                    suboptimality=self.suboptimality, time_limit=self.time_limit, relax_cost=self.relax_cost)
+                    suboptimality=self.suboptimality, time_limit=self.time_limit, relax_cost=self.relax_cost,
+                    fallback_suboptimality=self.fallback_suboptimality)
         opts.update(kwargs)
         return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **opts)
 
@@ -288,16 +317,10 @@ class BufferPlanner:
         s_ids = list(range(n, n + k))
         g_ids = list(range(n + k, n + 2 * k))
         self.last_observations, self.last_D, self.last_C = obs, D, C
-        c_max = self.c_max
-        while True:
-            keep = self._edges(D, C, k, c_max)
-            rows, cols = np.nonzero(keep)
-            dist = sparse.csr_matrix((np.maximum(D[rows, cols], 1e-9), (rows, cols)), shape=D.shape)
-            reach = dijkstra(dist, directed=True, indices=s_ids, unweighted=True)
-            ok = np.isfinite(reach[np.arange(k), g_ids])
-            if ok.all() or not self.relax_cost or not math.isfinite(c_max):
-                break
-            c_max *= 2.0
+        keep = self._edges(D, C, k, self.c_max)
+        ok, c_max = self._connect(keep, D, C, s_ids, g_ids)
+        rows, cols = np.nonzero(keep)
+        dist = sparse.csr_matrix((np.maximum(D[rows, cols], 1e-9), (rows, cols)), shape=D.shape)
         costm = sparse.csr_matrix((np.maximum(C[rows, cols], 1e-12), (rows, cols)), shape=D.shape)
         graph = WaypointGraph(dist, costm, obs, self.d_max, c_max)
         self.last_graph = graph
@@ -305,21 +328,57 @@ class BufferPlanner:
             bad = [int(i) for i in np.flatnonzero(~ok)]
             return MultiAgentPlan("infeasible", c_max=c_max, planning_time=time.perf_counter() - t0,
                                   message=f"agents {bad} have no path from start to goal in the pruned graph")
-        routes_cost = None
         if budget is not None:
-            graph, routes_cost = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
+            graph = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
         durations = graph.distance.copy()
         durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0) if self.time_model == "durative" else np.ones_like(durations.data)
         prox = Proximity(D, self.proximity_radius) if self.proximity_radius else None
         res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
                         suboptimality=self.suboptimality, time_limit=self.time_limit)
+        fb = self.fallback_suboptimality
+        if res.status == "timeout" and fb is not None and fb > self.suboptimality:
+            res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
+                            suboptimality=fb, time_limit=self.time_limit)
         out = MultiAgentPlan(res.status, soc=res.soc, makespan=res.makespan, c_max=c_max, cbs=res,
                              message=res.message)
         if res.solved:
-            out.nodes, out.depart_times, out.arrival_times = waypoints_from_paths(res.paths)
+            out.nodes, out.depart_times, out.node_arrivals, out.arrival_times = waypoints_from_paths(res.paths)
             out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
         out.planning_time = time.perf_counter() - t0
         return out
+
+    def _connect(self, keep: np.ndarray, D: np.ndarray, C: np.ndarray, s_ids, g_ids):
+        """Relax the cost cut-off locally until every agent's goal is reachable (edits ``keep``).
+
+        For an agent without a path, the edges leaving the region its start reaches (and the
+        edges entering the region that reaches its goal) are admitted up to twice the cut-off,
+        then four times, ...; the rest of the graph keeps ``c_max``. Returns ``(ok, c)``:
+        which agents have a path, and the largest cut-off used.
+        """
+        k = len(s_ids)
+        c = self.c_max
+        short = D < self.d_max
+        np.fill_diagonal(short, False)
+        n = len(self.observations)
+        # endpoints never gain edges into a start or out of a goal
+        short[:, n:n + k] = False
+        short[n + k:, :] = False
+        short[n:n + k, n + k:] = False
+        short[s_ids, g_ids] = D[s_ids, g_ids] < self.d_max
+        c_top = float(C[short].max()) if short.any() else 0.0
+        while True:
+            g = sparse.csr_matrix(keep)
+            fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
+            ok = fwd[np.arange(k), g_ids]
+            if ok.all() or not self.relax_cost or not math.isfinite(c) or c > c_top:
+                return ok, c
+            c *= 2.0
+            bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
+            for i in np.flatnonzero(~ok):
+                near_s = fwd[i]
+                near_g = bwd[i]
+                keep[near_s[:, None] & short & (C < c)] = True
+                keep[short & (C < c) & near_g[None, :]] = True
 
     @staticmethod
     def _route_cost(C: np.ndarray, nodes: List[int]) -> float:
@@ -329,13 +388,11 @@ class BufferPlanner:
     def _budget_subgraph(self, graph: WaypointGraph, s_ids, g_ids, budget: float):
         """The graph induced by the nodes of every agent's shortest route within ``budget``."""
         nodes = set()
-        costs = []
         for s, g in zip(s_ids, g_ids):
             p = risk_bounded_path(graph, s, g, budget)
             if not p.found:
                 p = shortest_path(graph, s, g, objective="cost")
             nodes.update(p.nodes)
-            costs.append(p.cost)
         idx = np.array(sorted(nodes), dtype=np.int64)
         mask = np.zeros(graph.n_nodes, dtype=bool)
         mask[idx] = True
@@ -345,7 +402,7 @@ class BufferPlanner:
         cdata = graph.cost_data()
         dist = sparse.csr_matrix((d.data[keep], (d.row[keep], d.col[keep])), shape=(n, n))
         cost = sparse.csr_matrix((cdata[keep], (d.row[keep], d.col[keep])), shape=(n, n))
-        return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max), costs
+        return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max)
 
 
 __all__ = ["BufferPlanner", "MultiAgentPlan", "direct_plans", "waypoints_from_paths"]

@@ -91,10 +91,12 @@ def test_aggregate_hand_computed():
     assert m["mean_cost_mean"] == pytest.approx(1.0)
     assert m["steps_mean"] == pytest.approx(15.0)
     assert agg["n"]["success_rate"] == 0 and math.isnan(agg["n"]["cost_mean"])
-    table = markdown_table(list(agg.values()), ["m", "n"])
+    table = markdown_table(list(agg.values()), ["m", "n"], bold_min_success=0.5)
     lines = table.splitlines()
     assert lines[0].startswith("| Problem | Agents | m | n |")
     assert lines[2] == "| Easy | 5 | **2.00 ± 1.00 (67%)** | - (0%) |"
+    # by default a method needs 90% success to be marked best
+    assert markdown_table(list(agg.values()), ["m", "n"]).splitlines()[2] == "| Easy | 5 | 2.00 ± 1.00 (67%) | - (0%) |"
 
 
 def test_unknown_method_is_named():

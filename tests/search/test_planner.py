@@ -40,9 +40,10 @@ def make_planner(points, pairwise, **kw):
 def test_waypoints_from_paths_hand_computed():
     # waits at node 5 (times 0..2), moves to 7 (arrives 4), leaves at 4, goal 9 at 6
     paths = [[(5, 0), (5, 1), (5, 2), (7, 4), (9, 6)], [(1, 0), (2, 1), (2, 2), (2, 3), (3, 4)]]
-    nodes, depart, arrive = waypoints_from_paths(paths)
+    nodes, depart, node_arrive, arrive = waypoints_from_paths(paths)
     assert nodes == [[5, 7], [1, 2]]
     assert depart == [[2, 4], [0, 3]]
+    assert node_arrive == [[0, 4], [0, 1]]
     assert arrive == [6, 4]
 
 
