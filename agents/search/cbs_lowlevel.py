@@ -283,16 +283,7 @@ def _forever_h(inst: MapfInstance, agent: int, cc: CompiledConstraints):
         return _NO_FOREVER
     out = getattr(cc, "_forever_h", None)
     if out is None:
-        F = cc.forever
-        hF = inst.dist_to(inst.goals[agent], frozenset(F))
-        late = [UNREACHABLE] * inst.n_nodes
-        cut = [v for v in range(inst.n_nodes) if hF[v] >= UNREACHABLE]
-        if cut:
-            to_x = [(fw - 1, inst.dist_to(x)) for x, fw in F.items()]
-            for v in cut:
-                late[v] = max(lim - d[v] for lim, d in to_x)
-        out = (max(F.values()), hF, late)
-        cc._forever_h = out
+        out = cc._forever_h = _cut_off(inst, inst.goals[agent], frozenset(), cc.forever)
     return out
 
 
@@ -640,6 +631,8 @@ def earliest_arrival(
     if s == target:
         return 0
     L = cc.t_static + 1
+    if inst.unit:
+        return _earliest_unit(inst, cc, s, target, blocked, hd, L, deadline, counter)
     expand = make_expander(inst, cc, None)
     heap = [(hd[s], hd[s], s)]
     closed: Set[int] = set()
@@ -665,6 +658,92 @@ def earliest_arrival(
             ncode = (nt if nt < L else L) * N + w
             if ncode not in closed:
                 heapq.heappush(heap, (nt + hw, hw, ncode))
+    counter.expanded += pops
+    return UNREACHABLE
+
+
+def _cut_off(inst: MapfInstance, target: int, blocked: frozenset, closing: Dict[int, int]):
+    """``(TF, hF, late)`` for reaching ``target`` avoiding ``blocked`` when each node ``x`` of
+    ``closing`` is closed for good from time ``closing[x]`` (unit time; see :func:`_forever_h`)."""
+    hF = inst.dist_to(target, blocked | frozenset(closing))
+    late = [UNREACHABLE] * inst.n_nodes
+    cut = [v for v in range(inst.n_nodes) if hF[v] >= UNREACHABLE]
+    if cut:
+        to_x = [(fw - 1, inst.dist_to(x)) for x, fw in closing.items()]
+        for v in cut:
+            late[v] = max(lim - d[v] for lim, d in to_x)
+    return max(closing.values()), hF, late
+
+
+def _earliest_unit(inst: MapfInstance, cc: CompiledConstraints, s: int, target: int, blocked: frozenset,
+                   hd: List[int], L: int, deadline: float, counter: Counter) -> int:
+    """:func:`earliest_arrival` under unit time (successors inlined, "never again" cut-offs)."""
+    N = inst.n_nodes
+    vset, eset, forever = cc.vset, cc.eset, cc.forever
+    closing = {x: fw for x, fw in forever.items() if x != target and x not in blocked}
+    if closing:
+        cache = getattr(cc, "_cut_offs", None)
+        if cache is None:
+            cache = cc._cut_offs = {}
+        key = (target, blocked)
+        out = cache.get(key)
+        if out is None:
+            out = cache[key] = _cut_off(inst, target, blocked, closing)
+        TF, hF, late = out
+        if late[s] < 0:
+            return UNREACHABLE
+    else:
+        TF, hF, late = 1 << 62, None, None
+    succ = inst.succ
+    M = (L + 1) * N
+    B = 1 << 30
+    BM = B * M
+    LN = L * N
+    heap = [hd[s] * BM + hd[s] * M + s]
+    closed: Set[int] = set()
+    pops = 0
+    pop, push = heapq.heappop, heapq.heappush
+    while heap:
+        key = pop(heap)
+        code = key % M
+        if code in closed:
+            continue
+        closed.add(code)
+        v = code % N
+        rest = key // M
+        hv = rest % B
+        t = rest // B - hv
+        if v == target:
+            counter.expanded += pops
+            return t
+        pops += 1
+        if not pops & 1023 and _time.perf_counter() > deadline:
+            counter.expanded += pops
+            raise SearchTimeout
+        nt = t + 1
+        vb = nt * N
+        base = vb if nt < L else LN
+        src = (t * N + v) * N
+        for w in succ[v]:
+            hw = hd[w]
+            if hw >= UNREACHABLE or w in blocked or (vb + w) in vset:
+                continue
+            if w != v and (src + w) in eset:
+                continue
+            if forever:
+                fw = forever.get(w)
+                if fw is not None and nt >= fw:
+                    continue
+                if late is not None:
+                    if nt > late[w]:
+                        continue
+                    if nt >= TF:
+                        hw = hF[w]
+                        if hw >= UNREACHABLE:
+                            continue
+            ncode = base + w
+            if ncode not in closed:
+                push(heap, (nt + hw) * BM + hw * M + ncode)
     counter.expanded += pops
     return UNREACHABLE
 
