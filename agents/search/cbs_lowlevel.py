@@ -399,32 +399,43 @@ def space_time_astar(
     return None
 
 
+def _hsucc(inst: MapfInstance, agent: int) -> List[List[Tuple[int, int]]]:
+    """Per node, ``(successor, its distance to the agent's goal)`` for the successors (wait first)
+    from which the goal can be reached (cached on the instance)."""
+    cache = inst.__dict__.setdefault("_hsucc_cache", {})
+    out = cache.get(agent)
+    if out is None:
+        h = inst.h[agent]
+        out = [[(w, h[w]) for w in ws if h[w] < UNREACHABLE] for ws in inst.succ]
+        cache[agent] = out
+    return out
+
+
 def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Optional[Reservation],
                 deadline: float, counter: Counter, hs: int, gl: int, lm, L: int) -> Optional[List[Tuple[int, int]]]:
     """:func:`space_time_astar` under unit time, with the successor generation inlined.
 
-    Open entries are single integers ``((f * B + conflicts) * B + h) * M + code`` (``B`` and
-    ``M`` bound the fields), so the heap compares plain integers: the order is the same as
-    ``(f, conflicts, h, code)`` tuples.
+    Open entries are single integers ``f | conflicts | h | code`` (bit fields, most significant
+    first), so the heap compares plain integers in the order of ``(f, conflicts, h, code)``.
     """
     N = inst.n_nodes
-    h = inst.h[agent]
     s, g = inst.starts[agent], inst.goals[agent]
     goal_min = cc.goal_min
     vset, eset, forever = cc.vset, cc.eset, cc.forever
     occ, moves, parked = (res.occ, res.moves, res.parked) if res is not None else _EMPTY_RES_SETS
-    succ = inst.succ
-    M = (L + 1) * N
-    B = 1 << 20
-    BM = B * M
-    BBM = B * BM
+    hsucc = _hsucc(inst, agent)
+    S1 = ((L + 1) * N).bit_length()  # codes are below (L + 1) * N
+    MASK = (1 << S1) - 1
+    S2 = S1 + 24
+    S3 = S2 + 24
+    FMASK = (1 << 24) - 1
     # from the time every "never again" constraint holds on, the agent moves in the graph without
     # those nodes: its distances there are a stronger admissible heuristic, and infinite where
     # the goal is cut off (which proves infeasibility without sweeping the whole horizon)
     TF, hF, late = _forever_h(inst, agent, cc)
     if late is not None and late[s] < 0:
         return None
-    heap = [(hs * B + 0) * BM + hs * M + s]
+    heap = [(hs << S3) | (hs << S1) | s]
     best = {s: hs << 24}
     parent = {s: -1}
     tclose: Dict[int, int] = {}
@@ -432,16 +443,15 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
     pop = heapq.heappop
     push = heapq.heappush
     LN = L * N
+    NN = N * N
     while heap:
         key = pop(heap)
-        code = key % M
+        code = key & MASK
         if code in tclose:
             continue
-        rest = key // M
-        hh = rest % B
-        rest //= B
-        c = rest % B
-        t = rest // B - hh
+        hh = (key >> S1) & FMASK
+        c = (key >> S2) & FMASK
+        t = (key >> S3) - hh
         tclose[code] = t
         v = code % N
         if v == g and t > goal_min:
@@ -454,35 +464,32 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
         nt = t + 1
         vbase = nt * N
         base = vbase if nt < L else LN
-        tv = t * N + v
-        src = tv * N
-        for w in succ[v]:
-            hw = h[w]
-            if hw >= UNREACHABLE:
-                continue
+        tNN = t * NN
+        src = tNN + v * N
+        for w, hw in hsucc[v]:
             vc = vbase + w
             if vc in vset:
                 continue
             if w != v:
                 if (src + w) in eset:
                     continue
-                dc = 1 if ((t * N + w) * N + v) in moves else 0
+                dc = 1 if (tNN + w * N + v) in moves else 0
             else:
                 dc = 0
             if forever:
                 fw = forever.get(w)
                 if (fw is not None and nt >= fw) or nt > late[w]:
                     continue
+                if nt >= TF:
+                    hw = hF[w]
+                    if hw >= UNREACHABLE:
+                        continue
             if vc in occ:
                 dc += 1
             if parked:
                 pt = parked.get(w)
                 if pt is not None and nt >= pt:
                     dc += 1
-            if nt >= TF:
-                hw = hF[w]
-                if hw >= UNREACHABLE:
-                    continue
             if nt + hw < gl:
                 hw = gl - nt
             if lm is not None:
@@ -502,7 +509,7 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
                 continue
             best[ncode] = pk
             parent[ncode] = code
-            push(heap, nf * BBM + nc * BM + hw * M + ncode)
+            push(heap, (nf << S3) | (nc << S2) | (hw << S1) | ncode)
     counter.expanded += pops
     return None
 
@@ -758,7 +765,7 @@ class MDD:
     kept transitions ``(v, t, w, t2)``.
     """
 
-    __slots__ = ("cost", "edges", "levels", "must", "children", "start", "goal", "N", "_singles", "_kids")
+    __slots__ = ("cost", "edges", "levels", "must", "_children", "start", "goal", "N", "_singles", "_kids")
 
     def __init__(self, cost: int, edges: List[Tuple[int, int, int, int]], start: int, goal: int, N: int, unit: bool):
         self.cost = cost
@@ -768,15 +775,13 @@ class MDD:
         self.N = N
         self._singles: Optional[List[Tuple[int, int]]] = None
         self._kids: Optional[Dict[int, List[int]]] = None
+        self._children: Optional[Dict[int, List[int]]] = None
         levels: List[Set[int]] = [set() for _ in range(cost + 1)]
         levels[0].add(start)
         levels[cost].add(goal)
-        children: Dict[int, List[int]] = {}
-        for v, t, w, t2 in edges:
-            levels[t2].add(w)
-            children.setdefault(t * N + v, []).append(t2 * N + w)
+        for e in edges:
+            levels[e[3]].add(e[2])
         self.levels = levels
-        self.children = children
         if unit:
             self.must = [lv if len(lv) == 1 else set() for lv in levels]
         else:
@@ -822,11 +827,35 @@ class MDD:
                 stack.append(nxt)
         return False
 
+    @property
+    def children(self) -> Dict[int, List[int]]:
+        """State code ``t * N + v`` -> the codes ``t2 * N + w`` of its children (built on first use)."""
+        if self._children is None:
+            N = self.N
+            children: Dict[int, List[int]] = {}
+            for v, t, w, t2 in self.edges:
+                k = t * N + v
+                lst = children.get(k)
+                if lst is None:
+                    children[k] = [t2 * N + w]
+                else:
+                    lst.append(t2 * N + w)
+            self._children = children
+        return self._children
+
     def kids(self) -> Dict[int, List[int]]:
         """State code ``t * N + v`` -> the nodes of its children (built on first use)."""
         if self._kids is None:
             N = self.N
-            self._kids = {code: [c % N for c in lst] for code, lst in self.children.items()}
+            kids: Dict[int, List[int]] = {}
+            for v, t, w, _ in self.edges:
+                k = t * N + v
+                lst = kids.get(k)
+                if lst is None:
+                    kids[k] = [w]
+                else:
+                    lst.append(w)
+            self._kids = kids
         return self._kids
 
     def singletons(self) -> List[Tuple[int, int]]:
