@@ -56,6 +56,8 @@ def test_search_beats_the_straight_line_past_the_obstacle(setup):
     assert sorb.success and ours.success
     assert sorb.plan_status in ("optimal", "suboptimal")
     assert ours.cost.max() < sorb.cost.max()
+    budget = execute(env, METHODS["ours_budget"], setup.models, setup.planner, starts, goals)
+    assert budget.success and budget.cost.max() < sorb.cost.max()
     assert sorb.trajectories.shape == (sorb.steps + 1, 2, 2)
     env.close()
 
