@@ -332,7 +332,7 @@ class BufferPlanner:
             graph = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
         durations = graph.distance.copy()
         durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0) if self.time_model == "durative" else np.ones_like(durations.data)
-        prox = Proximity(D, self.proximity_radius) if self.proximity_radius else None
+        prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
         res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
                         suboptimality=self.suboptimality, time_limit=self.time_limit)
         fb = self.fallback_suboptimality
@@ -346,6 +346,16 @@ class BufferPlanner:
             out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
         out.planning_time = time.perf_counter() - t0
         return out
+
+    def _proximity_matrix(self, D: np.ndarray, k: int) -> np.ndarray:
+        """Node distances for proximity conflicts; starts among themselves (and goals among
+        themselves) are exempt: agents placed or parked side by side by the environment are
+        not a planning conflict, and otherwise such a problem could never be solved."""
+        n = len(self.observations)
+        P = D.copy()
+        for lo in (n, n + k):
+            P[lo:lo + k, lo:lo + k] = np.inf
+        return P
 
     def _connect(self, keep: np.ndarray, D: np.ndarray, C: np.ndarray, s_ids, g_ids):
         """Relax the cost cut-off locally until every agent's goal is reachable (edits ``keep``).

@@ -134,3 +134,21 @@ def test_direct_plans_have_no_waypoints():
     plans = direct_plans(goals, ["a", "b"])
     assert len(plans["a"].waypoints) == 0
     np.testing.assert_allclose(plans["b"].goal, goals[1])
+
+
+def test_agents_starting_side_by_side_can_be_planned():
+    pts = grid_points(6)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=1.5)
+    starts = np.array([[0.0, 0.0], [1.0, 0.0]])  # closer than the proximity radius
+    goals = np.array([[5.0, 5.0], [5.0, 4.0]])  # so are the goals
+    plan = planner.plan(starts, goals)
+    assert plan.solved, plan.message
+    # on the way, the agents never come closer than the radius
+    seq = plan.cbs.node_sequences(pad=True)
+    D = planner.last_D
+    n = len(pts)
+    for t in range(1, min(len(seq[0]), len(seq[1])) - 1):
+        u, v = seq[0][t], seq[1][t]
+        if {u, v} <= {n, n + 1} or {u, v} <= {n + 2, n + 3}:
+            continue
+        assert min(D[u, v], D[v, u]) >= 1.5
