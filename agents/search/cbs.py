@@ -210,7 +210,7 @@ class CTNode:
     """
 
     __slots__ = ("g", "h", "f", "id", "depth", "paths", "cons", "conflicts", "n_conflicts", "h_done",
-                 "lb", "closed")
+                 "lb", "closed", "pending")
 
     def __init__(self, g: int, paths: List[AgentPath], cons: List[ConstraintSet],
                  conflicts: Dict[Tuple[int, int], List[Conflict]], node_id: int, depth: int = 0, h: int = 0):
@@ -226,6 +226,9 @@ class CTNode:
         self.h_done = False
         self.lb = g
         self.closed = False
+        #: ``(parent, local agent, constraint set)`` while the node is not generated yet: its
+        #: path is planned when it is first popped (``g`` and ``f`` are lower bounds until then)
+        self.pending = None
 
     def set_conflicts(self, conflicts: Dict[Tuple[int, int], List[Conflict]]) -> None:
         self.conflicts = conflicts
@@ -277,7 +280,7 @@ class _Context:
         return self._corridors
 
     def compile(self, gid: int, cons: ConstraintSet):
-        key = (gid, cons.key)
+        key = (gid, cons.content)
         cc = self.compiled.get(key)
         if cc is None:
             cc = compile_constraints(cons, self.inst.n_nodes, self.inst.goals[gid])
@@ -447,7 +450,7 @@ class _CBS:
     def _mdd(self, node: CTNode, i: int) -> MDD:
         gid = self.agents[i]
         cons = node.cons[i]
-        key = (gid, cons.key)
+        key = (gid, cons.content)
         ctx = self.ctx
         m = ctx.mdds.get(key)
         if m is None:
@@ -460,7 +463,7 @@ class _CBS:
                 for _ in range(_ANCESTORS):
                     if anc is None:
                         break
-                    old = ctx.mdds.get((gid, anc.key))
+                    old = ctx.mdds.get((gid, anc.content))
                     if old is not None and old.cost == cost:
                         m = prune_mdd(old, cc)
                         break
@@ -517,7 +520,7 @@ class _CBS:
         return c.cls
 
     def _symmetric_split(self, node: CTNode, c: Conflict):
-        """A corridor or rectangle split for ``c`` and its class, or ``None``."""
+        """A corridor or rectangle split for ``c``: ``(class, branches, forced)``, or ``None``."""
         ctx = self.ctx
         if c.kind not in (VERTEX, EDGE):
             return None
@@ -527,7 +530,7 @@ class _CBS:
         if corridors is not None:
             def earliest(gid: int, target: int, cid: Optional[int]) -> int:
                 cons = node.cons[self.local[gid]]
-                key = (gid, cons.key, target, cid)
+                key = (gid, cons.content, target, cid)
                 val = ctx.arrivals.get(key)
                 if val is None:
                     blocked = corridors.inner_sets[cid] if cid is not None else frozenset()
@@ -547,20 +550,24 @@ class _CBS:
                     m = self._mdd(node, i)
                     cards.append(not m.avoidable(rc.node, rc.start, True, rc.end))
                 cls = CARDINAL if all(cards) else (SEMI_CARDINAL if any(cards) else NON_CARDINAL)
-                return cls, br
+                return cls, br, tuple(cards)
         geom = ctx.geometry
         if geom is not None and c.kind == VERTEX:
             br = geom.split(c, c.a1, self._mdd(node, l1), c.a2, self._mdd(node, l2))
             if br is not None:
-                return CARDINAL, br
+                return CARDINAL, br, (True, True)
         return None
 
     def _choose(self, node: CTNode):
         """The conflict to split on and its branches ``[(agent, constraints), ...]``."""
+        return self._choose_forced(node)[0]
+
+    def _choose_forced(self, node: CTNode):
+        """:meth:`_choose`, and per branch whether it is known to raise its agent's cost."""
         allc = [c for lst in node.conflicts.values() for c in lst]
         allc.sort(key=lambda c: (c.time, c.a1, c.a2))
         if not self.prioritize:
-            return allc[0].branches(self.tr)
+            return allc[0].branches(self.tr), (False, False)
         for c in allc:
             self._classify(node, c)
         tr = self.tr
@@ -572,21 +579,24 @@ class _CBS:
             # rank 0: target, corridor or rectangle reasoning; rank 1: a plain split
             key = (c.cls, 0 if (c.kind == TARGET and self.tr) else 1, c.time)
             branches = None
+            forced = (c.card1, c.card2)
             if symmetric:
                 sym = self._symmetric_split(node, c)
                 if sym is not None:
                     key = (min(sym[0], c.cls), 0, c.time)
                     branches = sym[1]
+                    forced = sym[2]
             if best_key is None or key < best_key:
                 best_key = key
-                best = branches if branches is not None else c
+                best = (branches if branches is not None else c, forced)
                 if key[:2] == (CARDINAL, 0):
                     break
             if not symmetric and best_key is not None:
                 break  # sorted by class and time already
-        if isinstance(best, Conflict):
-            return best.branches(self.tr)
-        return best
+        split, forced = best
+        if isinstance(split, Conflict):
+            return split.branches(self.tr), forced
+        return split, forced
 
     # -------------------------------------------------------------- heuristic
     def _pair_cardinal(self, node: CTNode, lst: List[Conflict]) -> bool:
@@ -597,7 +607,7 @@ class _CBS:
 
     def _dependent(self, node: CTNode, i: int, j: int) -> bool:
         """Whether no two optimal paths of i and j avoid each other (memoised MDD merge)."""
-        key = (self.agents[i], self.agents[j], node.cons[i].key, node.cons[j].key)
+        key = (self.agents[i], self.agents[j], node.cons[i].content, node.cons[j].content)
         dep = self.ctx.dependent.get(key)
         if dep is None:
             dep = mdds_dependent(self._mdd(node, i), self._mdd(node, j), self.inst.near_mat)
@@ -614,7 +624,7 @@ class _CBS:
         ctx = self.ctx
         gi, gj = self.agents[i], self.agents[j]
         ci, cj = node.cons[i], node.cons[j]
-        val = ctx.pairs.get((gi, gj, ci.key, cj.key))
+        val = ctx.pairs.get((gi, gj, ci.content, cj.content))
         if val is not None or not self.inst.unit:
             return val
         for side in (0, 1):
@@ -625,13 +635,13 @@ class _CBS:
                     break
                 walked.append(cur.constraint)
                 cur = cur.parent
-                key = (gi, gj, cur.key, cj.key) if side == 0 else (gi, gj, ci.key, cur.key)
+                key = (gi, gj, cur.content, cj.content) if side == 0 else (gi, gj, ci.content, cur.content)
                 sol = ctx.pair_solutions.get(key)
                 if sol is not None:
                     total, pi, pj = sol
                     p = pi if side == 0 else pj
                     if all(satisfies(p, c) for c in walked):
-                        ctx.pairs[(gi, gj, ci.key, cj.key)] = total
+                        ctx.pairs[(gi, gj, ci.content, cj.content)] = total
                         ctx.stats.pair_reuses += 1
                         return total
         return None
@@ -641,7 +651,7 @@ class _CBS:
         ctx = self.ctx
         gi, gj = self.agents[i], self.agents[j]
         ci, cj = node.cons[i], node.cons[j]
-        key = (gi, gj, ci.key, cj.key)
+        key = (gi, gj, ci.content, cj.content)
         val = self._pair_known(node, i, j)
         if val is None:
             ctx.stats.pair_searches += 1
@@ -735,6 +745,12 @@ class _CBS:
             if node.f > self.lower_bound:
                 self.lower_bound = node.f
             ctx.check_time()
+            if node.pending is not None:
+                if self._generate(node):
+                    if not self.sub:
+                        stats.hl_generated += 1
+                    heapq.heappush(open_list, node)
+                continue
             if ctx.pair_check_at is not None and not self.sub and _time.perf_counter() > ctx.pair_check_at:
                 ctx.pair_check_at = None
                 ctx.infeasible_reason = ctx.opt._pair_check()
@@ -765,17 +781,37 @@ class _CBS:
                 heapq.heappush(open_list, node)
                 continue
             for child in children:
-                if not self.sub:
+                if not self.sub and child.pending is None:
                     stats.hl_generated += 1
                 heapq.heappush(open_list, child)
         return "infeasible", None
 
     def _expand(self, node: CTNode) -> Optional[List[CTNode]]:
-        branches = self._choose(node)
+        """The children of ``node``, or ``None`` when a bypass improved ``node`` itself.
+
+        A branch known to raise its agent's cost (cardinal side) cannot give a bypass, so its
+        child is only created (``pending``), with the parent's bound: it is planned when popped,
+        which saves the low-level search of every child the search never reaches.
+        """
+        branches, forced = self._choose_forced(node)
         children = []
         for k, (gid, cons) in enumerate(branches):
             i = self.local[gid]
             new_cons = node.cons[i].add(*cons)
+            if forced[k]:
+                # the agent's new cost exceeds its old one, and a length constraint's time
+                cost = node.paths[i].cost + 1
+                for c in cons:
+                    if isinstance(c, LengthConstraint) and c.time + 1 > cost:
+                        cost = c.time + 1
+                child = CTNode(node.g - node.paths[i].cost + cost, None, None, {}, next(self.ctx.ids),
+                               node.depth + 1)
+                child.n_conflicts = node.n_conflicts
+                child.f = max(node.f, child.g)
+                child.h = child.f - child.g
+                child.pending = (node, i, new_cons)
+                children.append(child)
+                continue
             path = self._plan(i, new_cons, node.paths)
             if path is None:
                 continue
@@ -800,6 +836,27 @@ class _CBS:
                 child.f = node.f
             children.append(child)
         return children
+
+    def _generate(self, node: CTNode) -> bool:
+        """Plan a pending node's path; False if the constraints leave the agent no path."""
+        parent, i, new_cons = node.pending
+        node.pending = None
+        path = self._plan(i, new_cons, parent.paths)
+        if path is None:
+            return False
+        paths = list(parent.paths)
+        paths[i] = path
+        conflicts = {p: lst for p, lst in parent.conflicts.items() if i not in p}
+        self._detect(i, path, paths, conflicts)
+        cons_list = list(parent.cons)
+        cons_list[i] = new_cons
+        node.g = parent.g - parent.paths[i].cost + path.cost
+        node.paths = paths
+        node.cons = cons_list
+        node.set_conflicts(conflicts)
+        node.f = max(node.f, node.g)
+        node.h = node.f - node.g
+        return True
 
 
 # ---------------------------------------------------------------------------------- ECBS

@@ -11,8 +11,9 @@ Times are integer plan steps. Two time models share the same constraint classes:
   forbids occupying ``node`` during step ``[t, t + 1)``.
 
 Constraint sets are persistent linked lists (:class:`ConstraintSet`): a child node of the
-constraint tree shares its parent's set and adds one link, so creating a node costs O(1) and
-every set has a unique integer ``key`` that caches (MDDs, pair sub-problems) can use.
+constraint tree shares its parent's set and adds one link. Each set also carries its
+``content`` as a frozenset, which caches (compiled constraints, MDDs, pair sub-problems) are
+keyed by: nodes reached by adding the same constraints in another order share their entries.
 """
 from __future__ import annotations
 
@@ -72,22 +73,26 @@ class LengthConstraint:
 Constraint = Union[VertexConstraint, EdgeConstraint, RangeConstraint, LengthConstraint]
 
 _keys = itertools.count(1)
+_NO_CONSTRAINTS: frozenset = frozenset()
 
 
 class ConstraintSet:
     """An immutable set of one agent's constraints, as a linked list sharing its parent's links.
 
-    ``key`` is unique per set object (not per content) and is what caches are keyed by;
-    ``size`` is the number of constraints.
+    ``key`` is unique per set object; ``content`` is the constraints as a frozenset, equal for
+    two sets that hold the same constraints however they were added (what caches of results
+    that depend only on the constraints are keyed by); ``size`` is the number of constraints.
     """
 
-    __slots__ = ("constraint", "parent", "key", "size")
+    __slots__ = ("constraint", "parent", "key", "size", "content")
 
     def __init__(self, constraint: Optional[Constraint] = None, parent: Optional["ConstraintSet"] = None):
         self.constraint = constraint
         self.parent = parent
         self.key = next(_keys)
         self.size = 0 if constraint is None else (parent.size if parent is not None else 0) + 1
+        base = parent.content if parent is not None else _NO_CONSTRAINTS
+        self.content: frozenset = base if constraint is None else base | {constraint}
 
     def add(self, *constraints: Constraint) -> "ConstraintSet":
         """A new set holding this set's constraints plus ``constraints``."""
