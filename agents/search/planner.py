@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import dijkstra
 from .cbs import CBSResult, solve_cbs
 from .controller import AgentPlan
 from .mapf_instance import Proximity
-from .single import risk_bounded_path, shortest_path
+from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .graph import WaypointGraph
 
 #: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
@@ -183,6 +183,8 @@ class BufferPlanner:
             infeasible); see :meth:`_connect`.
         fallback_suboptimality: if CBS runs out of time, one more try with this (larger)
             suboptimality bound and the same time limit (``None``: no second try).
+        budget_labels: label limit of the exact risk-bounded search of :meth:`plan`'s budget
+            mode; past it, a Lagrangian path within the budget is used instead.
     """
 
     def __init__(
@@ -201,6 +203,7 @@ class BufferPlanner:
         time_limit: float = 5.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
+        budget_labels: int = 2_000,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -229,6 +232,7 @@ class BufferPlanner:
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
             raise ValueError(f"fallback_suboptimality must be >= 1 or None, got {fallback_suboptimality!r}")
         self.fallback_suboptimality = fallback_suboptimality
+        self.budget_labels = int(budget_labels)
         #: node observations of the last problem graph (buffer nodes, starts, goals)
         self.last_observations: Optional[np.ndarray] = None
         #: the last problem's dense matrices and pruned graph (for plots and inspection)
@@ -252,7 +256,7 @@ class BufferPlanner:
         opts = dict(d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                     proximity_radius=self.proximity_radius, time_model=self.time_model,
                     suboptimality=self.suboptimality, time_limit=self.time_limit, relax_cost=self.relax_cost,
-                    fallback_suboptimality=self.fallback_suboptimality)
+                    fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
         opts.update(kwargs)
         return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **opts)
 
@@ -306,7 +310,8 @@ class BufferPlanner:
         """Plan for agents starting at observations ``starts[i]`` and going to ``goals[i]``.
 
         ``budget`` (optional) bounds each agent's total predicted cost: every agent's route is
-        first the shortest one within the budget (an exact resource-constrained shortest path;
+        first the shortest one within the budget (an exact resource-constrained shortest path,
+        or a Lagrangian one within the budget if the exact search exceeds ``budget_labels``;
         the cheapest route if none fits), and CBS then times the agents on the graph induced by
         the nodes of those routes.
         """
@@ -399,7 +404,9 @@ class BufferPlanner:
         """The graph induced by the nodes of every agent's shortest route within ``budget``."""
         nodes = set()
         for s, g in zip(s_ids, g_ids):
-            p = risk_bounded_path(graph, s, g, budget)
+            p = risk_bounded_path(graph, s, g, budget, max_labels=self.budget_labels)
+            if p.status == "limit":  # the exact search ran long: a fast path within the budget
+                p = lagrangian_risk_path(graph, s, g, budget)
             if not p.found:
                 p = shortest_path(graph, s, g, objective="cost")
             nodes.update(p.nodes)

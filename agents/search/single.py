@@ -29,12 +29,12 @@ class Plan:
     nodes: List[int]
     distance: float
     cost: float
-    status: str  # "optimal" | "infeasible" | "limit"
+    status: str  # "optimal" | "feasible" (within budget, maybe not shortest) | "infeasible" | "limit"
     stats: dict = field(default_factory=dict)
 
     @property
     def found(self) -> bool:
-        return self.status == "optimal"
+        return self.status in ("optimal", "feasible")
 
     @property
     def waypoints(self) -> List[int]:
@@ -176,4 +176,50 @@ def risk_bounded_path(
     return Plan(nodes, L_d[best_label], L_c[best_label], status, stats)
 
 
-__all__ = ["Plan", "risk_bounded_path", "shortest_path"]
+def lagrangian_risk_path(
+    graph: WaypointGraph,
+    source: int,
+    target: int,
+    budget: float,
+    max_iter: int = 30,
+) -> Plan:
+    """A short path whose total predicted cost is at most ``budget``, by Lagrangian relaxation.
+
+    The LARAC scheme: shortest paths under ``D + lam * C``, with ``lam`` set from the best
+    path known to meet the budget and the best one known to break it, until they agree. A few
+    Dijkstra calls instead of a label search: the result always meets the budget (when any
+    path does) but may be longer than :func:`risk_bounded_path`'s optimum; ``stats["gap"]``
+    bounds how much longer (the Lagrangian lower bound).
+    """
+    source = _check_node(graph, source, "source")
+    target = _check_node(graph, target, "target")
+    if not budget >= 0:
+        raise ValueError(f"budget must be >= 0, got {budget!r}")
+    fast = shortest_path(graph, source, target, "distance")
+    if not fast.found:
+        return Plan([], np.inf, np.inf, "infeasible", {"reason": "target unreachable"})
+    if fast.cost <= budget:
+        return Plan(fast.nodes, fast.distance, fast.cost, "optimal", {"iterations": 0})
+    safe = shortest_path(graph, source, target, "cost")
+    if safe.cost > budget:
+        return Plan([], np.inf, np.inf, "infeasible",
+                    {"reason": f"cheapest path costs {safe.cost:.3f} > budget {budget:g}"})
+    lower = fast.distance
+    for it in range(max_iter):
+        if fast.cost - safe.cost <= 1e-12:
+            break
+        lam = (safe.distance - fast.distance) / (fast.cost - safe.cost)
+        r = shortest_path(graph, source, target, "weighted", beta=lam)
+        lower = max(lower, r.distance + lam * (r.cost - budget))
+        w_r = r.distance + lam * r.cost
+        if w_r >= safe.distance + lam * safe.cost - 1e-9:
+            break
+        if r.cost <= budget:
+            safe = r
+        else:
+            fast = r
+    return Plan(safe.nodes, safe.distance, safe.cost, "feasible",
+                {"iterations": it + 1, "gap": safe.distance - lower})
+
+
+__all__ = ["Plan", "lagrangian_risk_path", "risk_bounded_path", "shortest_path"]

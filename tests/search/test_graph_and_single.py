@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from agents.search.graph import WaypointGraph
-from agents.search.single import risk_bounded_path, shortest_path
+from agents.search.single import lagrangian_risk_path, risk_bounded_path, shortest_path
 
 
 def stand_in(n=60, seed=0):
@@ -129,6 +129,15 @@ def test_risk_bounded_path_is_optimal_against_brute_force(seed):
             assert plan.status == "optimal"
             assert plan.distance == pytest.approx(want_d)
             assert plan.cost <= budget + 1e-9
+        # the Lagrangian path meets the budget whenever any path does, never beats the optimum,
+        # and its gap bound holds
+        lag = lagrangian_risk_path(g, 0, n - 1, budget)
+        if want_path is None:
+            assert lag.status == "infeasible"
+        else:
+            assert lag.found and lag.cost <= budget + 1e-9
+            assert lag.distance >= want_d - 1e-9
+            assert lag.distance - want_d <= lag.stats.get("gap", 0.0) + 1e-9
 
 
 def test_risk_budget_between_fast_and_safe_routes():
