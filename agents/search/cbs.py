@@ -98,6 +98,7 @@ HEURISTICS = ("none", "cg", "dg", "wdg")
 _INF = 1 << 50
 #: how many constraint-set ancestors are searched for an MDD or pair result to reuse
 _ANCESTORS = 8
+_F_AWARE = True
 
 
 # ---------------------------------------------------------------------------------- results
@@ -210,7 +211,7 @@ class CTNode:
     """
 
     __slots__ = ("g", "h", "f", "id", "depth", "paths", "cons", "conflicts", "n_conflicts", "h_done",
-                 "lb", "closed", "pending")
+                 "lb", "closed", "pending", "hedges")
 
     def __init__(self, g: int, paths: List[AgentPath], cons: List[ConstraintSet],
                  conflicts: Dict[Tuple[int, int], List[Conflict]], node_id: int, depth: int = 0, h: int = 0):
@@ -229,6 +230,8 @@ class CTNode:
         #: ``(parent, local agent, constraint set)`` while the node is not generated yet: its
         #: path is planned when it is first popped (``g`` and ``f`` are lower bounds until then)
         self.pending = None
+        #: the weighted conflict graph ``{(i, j): weight}`` the heuristic was computed from
+        self.hedges: Optional[Dict[Tuple[int, int], int]] = None
 
     def set_conflicts(self, conflicts: Dict[Tuple[int, int], List[Conflict]]) -> None:
         self.conflicts = conflicts
@@ -257,6 +260,8 @@ class _Context:
         self.pairs: Dict[Tuple[int, int, int, int], int] = {}
         #: pair key -> (optimal cost, the two paths) of solved pair sub-problems (unit time)
         self.pair_solutions: Dict[Tuple[int, int, int, int], Tuple[int, AgentPath, AgentPath]] = {}
+        #: per agent pair, how many of its pair searches stopped at their node limit
+        self.pair_limit_hits: Dict[Tuple[int, int], int] = {}
         self.dependent: Dict[Tuple[int, int, int, int], bool] = {}
         self.arrivals: Dict[Tuple[int, int, int, Optional[int]], int] = {}
         self.compiled: Dict[Tuple[int, int], object] = {}
@@ -575,6 +580,7 @@ class _CBS:
         best_key = None
         best = None
         symmetric = self.symmetry and self.inst.unit
+        faware = _F_AWARE and node.hedges is not None
         for c in allc:
             # rank 0: target, corridor or rectangle reasoning; rank 1: a plain split
             key = (c.cls, 0 if (c.kind == TARGET and self.tr) else 1, c.time)
@@ -586,12 +592,23 @@ class _CBS:
                     key = (min(sym[0], c.cls), 0, c.time)
                     branches = sym[1]
                     forced = sym[2]
+            if faware:
+                # first the splits whose children both have a larger bound than the node
+                brs = branches if branches is not None else c.branches(self.tr)
+                raised = 0
+                for (gid, cons), fc in zip(brs, forced):
+                    if fc and self._child_bound(node, self.local[gid], cons, True)[1] > node.f:
+                        raised += 1
+                key = (-raised,) + key
             if best_key is None or key < best_key:
                 best_key = key
                 best = (branches if branches is not None else c, forced)
-                if key[:2] == (CARDINAL, 0):
+                if faware:
+                    if key[0] == -2:
+                        break
+                elif key[:2] == (CARDINAL, 0):
                     break
-            if not symmetric and best_key is not None:
+            if not symmetric and not faware and best_key is not None:
                 break  # sorted by class and time already
         split, forced = best
         if isinstance(split, Conflict):
@@ -655,10 +672,16 @@ class _CBS:
         val = self._pair_known(node, i, j)
         if val is None:
             ctx.stats.pair_searches += 1
+            # a pair whose searches keep running into the limit gets smaller limits (its weight
+            # is then a lower bound, as with any search that stops at the limit)
+            hits = ctx.pair_limit_hits.get((gi, gj), 0)
+            limit = max(ctx.opt.pair_node_limit >> hits, min(8, ctx.opt.pair_node_limit))
             sub = _CBS(ctx, [gi, gj], [ci, cj], heuristic="cg", prioritize=True, bypass=True,
-                       target_reasoning=self.tr, node_limit=ctx.opt.pair_node_limit, sub=True,
+                       target_reasoning=self.tr, node_limit=limit, sub=True,
                        init_paths=[node.paths[i], node.paths[j]], symmetry=self.symmetry)
             status, best = sub.run()
+            if status == "limit":
+                ctx.pair_limit_hits[(gi, gj)] = hits + 1
             if status == "solved":
                 total = best.g
                 if self.inst.unit:
@@ -705,7 +728,31 @@ class _CBS:
                 return _INF
             if w > 0:
                 edges[(i, j)] = w
+        node.hedges = edges
         return _min_vertex_cover(edges)
+
+    def _child_bound(self, node: CTNode, i: int, cons, forced: bool) -> Tuple[int, int]:
+        """``(g, f)`` lower bounds of the child that adds ``cons`` to local agent ``i``.
+
+        A forced branch raises the agent's cost by some ``d >= 1`` (more after a length
+        constraint); every edge ``(i, x)`` of the weighted conflict graph then still needs at
+        least its weight minus ``d`` (the pair's cost cannot drop, agent ``i``'s own cost rose by
+        ``d``), and the other edges are unchanged: the minimum vertex cover of that graph bounds
+        the child's heuristic.
+        """
+        if not forced:
+            return node.g, node.f
+        cost = node.paths[i].cost
+        new = cost + 1
+        for c in cons:
+            if isinstance(c, LengthConstraint) and c.time + 1 > new:
+                new = c.time + 1
+        d = new - cost
+        g = node.g + d
+        h = 0
+        if node.hedges:
+            h = _min_vertex_cover({e: (w - d if i in e else w) for e, w in node.hedges.items()})
+        return g, max(node.f, g + h)
 
     # -------------------------------------------------------------- search
     def _root(self) -> Optional[CTNode]:
@@ -799,16 +846,11 @@ class _CBS:
             i = self.local[gid]
             new_cons = node.cons[i].add(*cons)
             if forced[k]:
-                # the agent's new cost exceeds its old one, and a length constraint's time
-                cost = node.paths[i].cost + 1
-                for c in cons:
-                    if isinstance(c, LengthConstraint) and c.time + 1 > cost:
-                        cost = c.time + 1
-                child = CTNode(node.g - node.paths[i].cost + cost, None, None, {}, next(self.ctx.ids),
-                               node.depth + 1)
+                g, f = self._child_bound(node, i, cons, True)
+                child = CTNode(g, None, None, {}, next(self.ctx.ids), node.depth + 1)
                 child.n_conflicts = node.n_conflicts
-                child.f = max(node.f, child.g)
-                child.h = child.f - child.g
+                child.f = f
+                child.h = f - g
                 child.pending = (node, i, new_cons)
                 children.append(child)
                 continue
@@ -1010,7 +1052,8 @@ class CBSSolver:
         time_limit: wall-clock seconds; the search ends with status ``"timeout"``.
         node_limit: high-level expansions; the search ends with status ``"timeout"``.
         pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
-            (past it the pair's lower bound is used, which keeps the heuristic admissible).
+            (past it the pair's lower bound is used, which keeps the heuristic admissible); an
+            agent pair whose searches keep reaching it gets half of it each time, down to 8.
         pair_check_states: an exact two-agent feasibility check of every pair (which can prove
             infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
             once the search has run for a second when it is at most 100 times this.
