@@ -28,9 +28,14 @@ Algorithm
     Optimal CBS with prioritised conflicts (cardinal / semi-cardinal, classified with MDDs),
     bypass, target reasoning and an admissible high-level heuristic (``"cg"``: cardinal
     conflict graph, ``"dg"``: dependency graph, ``"wdg"``: weighted dependency graph, solved as
-    an edge-weighted minimum vertex cover). ``suboptimality=w > 1`` switches to ECBS (focal
-    search at both levels; the returned cost is at most ``w`` times the optimum).
-    ``vanilla=True`` turns prioritisation, bypass, target reasoning and the heuristic off.
+    an edge-weighted minimum vertex cover). With a heuristic, the conflict to split is chosen
+    f-aware: first the splits whose children get larger lower bounds (the raised agent's edges
+    of the weighted conflict graph lowered by its cost increase, the cover recomputed), and a
+    child that must raise its agent's cost is planned only when it is popped. Results that
+    depend only on constraints (MDDs, pair sub-problems) are cached by constraint content.
+    ``suboptimality=w > 1`` switches to ECBS (focal search at both levels; the returned cost is
+    at most ``w`` times the optimum). ``vanilla=True`` turns prioritisation, bypass, target and
+    symmetry reasoning and the heuristic off.
 
 Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
@@ -98,7 +103,6 @@ HEURISTICS = ("none", "cg", "dg", "wdg")
 _INF = 1 << 50
 #: how many constraint-set ancestors are searched for an MDD or pair result to reuse
 _ANCESTORS = 8
-_F_AWARE = True
 
 
 # ---------------------------------------------------------------------------------- results
@@ -211,7 +215,7 @@ class CTNode:
     """
 
     __slots__ = ("g", "h", "f", "id", "depth", "paths", "cons", "conflicts", "n_conflicts", "h_done",
-                 "lb", "closed", "pending", "hedges")
+                 "lb", "closed", "pending", "hedges", "hmemo")
 
     def __init__(self, g: int, paths: List[AgentPath], cons: List[ConstraintSet],
                  conflicts: Dict[Tuple[int, int], List[Conflict]], node_id: int, depth: int = 0, h: int = 0):
@@ -232,6 +236,8 @@ class CTNode:
         self.pending = None
         #: the weighted conflict graph ``{(i, j): weight}`` the heuristic was computed from
         self.hedges: Optional[Dict[Tuple[int, int], int]] = None
+        #: child bounds computed from ``hedges`` (see ``_CBS._child_bound``)
+        self.hmemo: Optional[dict] = None
 
     def set_conflicts(self, conflicts: Dict[Tuple[int, int], List[Conflict]]) -> None:
         self.conflicts = conflicts
@@ -311,13 +317,18 @@ def _min_vertex_cover(edges: Dict[Tuple[int, int], int]) -> int:
     """
     if not edges:
         return 0
+    return sum(val for _, _, val in _mvc_components(edges))
+
+
+def _mvc_components(edges: Dict[Tuple[int, int], int]) -> List[Tuple[List[int], Dict[Tuple[int, int], int], int]]:
+    """Per connected component of the positive-weight edges: ``(vertices, edges, cover value)``."""
     adj: Dict[int, Dict[int, int]] = {}
     for (i, j), w in edges.items():
         if w <= 0:
             continue
         adj.setdefault(i, {})[j] = max(w, adj.get(i, {}).get(j, 0))
         adj.setdefault(j, {})[i] = max(w, adj.get(j, {}).get(i, 0))
-    total = 0
+    out = []
     seen = set()
     for root in sorted(adj):
         if root in seen:
@@ -334,8 +345,9 @@ def _min_vertex_cover(edges: Dict[Tuple[int, int], int]) -> int:
                     stack.append(u)
         comp.sort()
         cedges = tuple(sorted((i, j, w) for i in comp for j, w in adj[i].items() if i < j))
+        cdict = {(i, j): w for i, j, w in cedges}
         if len(cedges) == 1:
-            total += cedges[0][2]
+            out.append((comp, cdict, cedges[0][2]))
             continue
         key = _canonical(comp, cedges)
         val = _mvc_cache.get(key)
@@ -344,8 +356,8 @@ def _min_vertex_cover(edges: Dict[Tuple[int, int], int]) -> int:
             if len(_mvc_cache) > 100_000:
                 _mvc_cache.clear()
             _mvc_cache[key] = val
-        total += val
-    return total
+        out.append((comp, cdict, val))
+    return out
 
 
 def _canonical(comp: List[int], cedges: Tuple[Tuple[int, int, int], ...]) -> Tuple:
@@ -580,33 +592,34 @@ class _CBS:
         best_key = None
         best = None
         symmetric = self.symmetry and self.inst.unit
-        faware = _F_AWARE and node.hedges is not None
+        # f-aware choice: with the weighted conflict graph known, prefer the splits whose
+        # children get larger lower bounds (see _child_bound), then cardinal ones, etc.
+        faware = node.hedges is not None
         for c in allc:
             # rank 0: target, corridor or rectangle reasoning; rank 1: a plain split
             key = (c.cls, 0 if (c.kind == TARGET and self.tr) else 1, c.time)
             branches = None
             forced = (c.card1, c.card2)
             if symmetric:
-                sym = self._symmetric_split(node, c)
+                if not c.sym_done:
+                    c.sym = self._symmetric_split(node, c)
+                    c.sym_done = True
+                sym = c.sym
                 if sym is not None:
                     key = (min(sym[0], c.cls), 0, c.time)
                     branches = sym[1]
                     forced = sym[2]
             if faware:
-                # first the splits whose children both have a larger bound than the node
+                # (how many children get a larger bound, the smaller and the larger child bound)
                 brs = branches if branches is not None else c.branches(self.tr)
-                raised = 0
-                for (gid, cons), fc in zip(brs, forced):
-                    if fc and self._child_bound(node, self.local[gid], cons, True)[1] > node.f:
-                        raised += 1
-                key = (-raised,) + key
+                fs = [self._child_bound(node, self.local[gid], cons, True)[1] if fc else node.f
+                      for (gid, cons), fc in zip(brs, forced)]
+                raised = sum(1 for f in fs if f > node.f)
+                key = (-raised, -min(fs), -max(fs)) + key
             if best_key is None or key < best_key:
                 best_key = key
                 best = (branches if branches is not None else c, forced)
-                if faware:
-                    if key[0] == -2:
-                        break
-                elif key[:2] == (CARDINAL, 0):
+                if not faware and key[:2] == (CARDINAL, 0):
                     break
             if not symmetric and not faware and best_key is not None:
                 break  # sorted by class and time already
@@ -729,7 +742,22 @@ class _CBS:
             if w > 0:
                 edges[(i, j)] = w
         node.hedges = edges
-        return _min_vertex_cover(edges)
+        node.hmemo = None
+        return self._cover_memo(node)["total"]
+
+    @staticmethod
+    def _cover_memo(node: CTNode) -> dict:
+        """The node's weighted conflict graph covered per component: ``{"total": value, "where":
+        {agent: (component edges, component value)}}``, plus child bounds as they get computed."""
+        memo = node.hmemo
+        if memo is None:
+            total, where = 0, {}
+            for comp, cedges, val in _mvc_components(node.hedges or {}):
+                total += val
+                for v in comp:
+                    where[v] = (cedges, val)
+            memo = node.hmemo = {"total": total, "where": where}
+        return memo
 
     def _child_bound(self, node: CTNode, i: int, cons, forced: bool) -> Tuple[int, int]:
         """``(g, f)`` lower bounds of the child that adds ``cons`` to local agent ``i``.
@@ -749,10 +777,19 @@ class _CBS:
                 new = c.time + 1
         d = new - cost
         g = node.g + d
-        h = 0
-        if node.hedges:
-            h = _min_vertex_cover({e: (w - d if i in e else w) for e, w in node.hedges.items()})
-        return g, max(node.f, g + h)
+        memo = self._cover_memo(node)
+        f = memo.get((i, d))
+        if f is None:
+            h = memo["total"]
+            part = memo["where"].get(i)
+            if part is not None:
+                cedges, val = part
+                if len(cedges) == 1:
+                    h += max(0, val - d) - val
+                else:
+                    h += _min_vertex_cover({e: (w - d if i in e else w) for e, w in cedges.items()}) - val
+            f = memo[(i, d)] = max(node.f, g + h)
+        return g, f
 
     # -------------------------------------------------------------- search
     def _root(self) -> Optional[CTNode]:

@@ -467,6 +467,9 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
         tNN = t * NN
         src = tNN + v * N
         for w, hw in hsucc[v]:
+            ncode = base + w
+            if ncode in tclose:
+                continue
             vc = vbase + w
             if vc in vset:
                 continue
@@ -498,9 +501,6 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
                     for lo, hi, bound in lst:
                         if lo <= nt <= hi and nt + hw < bound:
                             hw = bound - nt
-            ncode = base + w
-            if ncode in tclose:
-                continue
             nc = c + dc
             nf = nt + hw
             pk = (nf << 24) | nc

@@ -203,9 +203,10 @@ class Conflict:
     - ``TARGET``: ``a1`` is parked at its goal ``x1`` (it has made its final arrival) while
       ``a2`` is at ``x2`` (``x1`` itself, or a node within the radius).
 
-    ``cls`` (cardinal / semi-cardinal / non-cardinal) and ``card1``/``card2`` (whether the
-    branch constraining ``a1``/``a2`` must raise that agent's cost) are filled in lazily by
-    the high level.
+    ``cls`` (cardinal / semi-cardinal / non-cardinal), ``card1``/``card2`` (whether the
+    branch constraining ``a1``/``a2`` must raise that agent's cost) and ``sym`` (a corridor or
+    rectangle split) are filled in lazily by the high level; they depend only on the two
+    agents' paths and constraints, which every node sharing the conflict has in common.
     """
 
     kind: int
@@ -217,6 +218,9 @@ class Conflict:
     cls: Optional[int] = None
     card1: bool = False
     card2: bool = False
+    #: the symmetric (corridor / rectangle) split found for it, once looked for
+    sym: Optional[tuple] = None
+    sym_done: bool = False
 
     def branches(self, target_reasoning: bool = True) -> List[Tuple[int, Tuple[Constraint, ...]]]:
         """The two ways to resolve the conflict: ``[(agent, constraints), (agent, constraints)]``.

@@ -1,0 +1,200 @@
+"""The reuse and pruning machinery of CBS: MDD pruning, constraint checks on paths, content keys,
+"never again" cut-offs in the low level, against independent brute-force computations."""
+from collections import deque
+
+import numpy as np
+import pytest
+
+from agents.search.cbs_lowlevel import (
+    AgentPath,
+    Counter,
+    build_mdd,
+    earliest_arrival,
+    prune_mdd,
+    satisfies,
+    space_time_astar,
+)
+from agents.search.constraints import (
+    EMPTY,
+    FOREVER,
+    EdgeConstraint,
+    LengthConstraint,
+    RangeConstraint,
+    VertexConstraint,
+    compile_constraints,
+)
+from agents.search.mapf_instance import UNREACHABLE, MapfInstance
+
+
+def grid(rng, h, w, p_block):
+    free = rng.random((h, w)) >= p_block
+    idx = -np.ones((h, w), int)
+    cells = []
+    for r in range(h):
+        for c in range(w):
+            if free[r, c]:
+                idx[r, c] = len(cells)
+                cells.append((r, c))
+    adj = [[] for _ in cells]
+    for k, (r, c) in enumerate(cells):
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            r2, c2 = r + dr, c + dc
+            if 0 <= r2 < h and 0 <= c2 < w and free[r2, c2]:
+                adj[k].append(int(idx[r2, c2]))
+    return adj
+
+
+def allowed(cons, v, t):
+    """Whether being at ``v`` at time ``t`` is allowed by vertex / range constraints."""
+    for c in cons:
+        if isinstance(c, VertexConstraint) and (c.node, c.time) == (v, t):
+            return False
+        if isinstance(c, RangeConstraint) and c.node == v and c.start <= t <= c.end:
+            return False
+    return True
+
+
+def brute_paths(inst, adj, s, g, cons, T):
+    """Every walk of exactly ``T`` steps from ``s`` ending at ``g`` that meets ``cons`` (parked
+    at ``g`` afterwards), by plain enumeration."""
+    out = []
+
+    def rec(path):
+        t = len(path) - 1
+        if t == T:
+            if path[-1] == g:
+                p = AgentPath([(v, k) for k, v in enumerate(path)], inst)
+                if all(satisfies(p, c) for c in cons):
+                    out.append(tuple(path))
+            return
+        for w in [path[-1]] + adj[path[-1]]:
+            if allowed(cons, w, t + 1):
+                rec(path + [w])
+
+    if allowed(cons, s, 0):
+        rec([s])
+    return out
+
+
+def random_constraints(rng, agent, n, horizon, k):
+    out = []
+    for _ in range(k):
+        kind = rng.integers(4)
+        v, t = int(rng.integers(n)), int(rng.integers(1, horizon))
+        if kind == 0:
+            out.append(VertexConstraint(agent, v, t))
+        elif kind == 1:
+            out.append(EdgeConstraint(agent, v, int(rng.integers(n)), t))
+        elif kind == 2:
+            out.append(RangeConstraint(agent, v, t, t + int(rng.integers(0, 3))))
+        else:
+            out.append(LengthConstraint(agent, int(rng.integers(0, horizon))))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_pruned_mdd_is_the_built_mdd_and_holds_exactly_the_allowed_paths(seed):
+    rng = np.random.default_rng(seed)
+    adj = grid(rng, 3, 4, 0.15)
+    n = len(adj)
+    if n < 4:
+        return
+    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
+    inst = MapfInstance(adj, [s], [g])
+    if inst.h[0][s] >= UNREACHABLE:
+        return
+    counter = Counter()
+    base = EMPTY.add(*random_constraints(rng, 0, n, 6, 1))
+    more = base.add(*random_constraints(rng, 0, n, 6, 2))
+    cc_base, cc_more = (compile_constraints(c, n, g) for c in (base, more))
+    p_base = space_time_astar(inst, 0, cc_base, None, float("inf"), counter)
+    p_more = space_time_astar(inst, 0, cc_more, None, float("inf"), counter)
+    if p_base is None or p_more is None:
+        return
+    T = p_more[-1][1]
+    # the low level's cost is the brute-force optimum
+    assert T == min(t for t in range(0, 12) if brute_paths(inst, adj, s, g, list(more), t))
+    old = build_mdd(inst, 0, cc_base, p_base[-1][1])
+    built = build_mdd(inst, 0, cc_more, T)
+    # the states of all allowed paths of that cost are the MDD's levels
+    paths = brute_paths(inst, adj, s, g, list(more), T)
+    levels = [{p[t] for p in paths} for t in range(T + 1)]
+    assert [set(lv) for lv in built.levels] == levels
+    if old.cost == T:
+        pruned = prune_mdd(old, cc_more)
+        assert pruned is not None
+        assert sorted(pruned.edges) == sorted(built.edges)
+        assert [set(lv) for lv in pruned.levels] == levels
+
+
+def test_satisfies_each_kind():
+    adj = [[1], [0, 2], [1, 3], [2]]  # a line 0-1-2-3
+    inst = MapfInstance(adj, [0], [3])
+    p = AgentPath([(0, 0), (1, 1), (2, 2), (3, 3)], inst)
+    assert not satisfies(p, VertexConstraint(0, 2, 2)) and satisfies(p, VertexConstraint(0, 2, 1))
+    assert not satisfies(p, VertexConstraint(0, 3, 9))  # parked at its goal
+    assert not satisfies(p, EdgeConstraint(0, 1, 2, 1)) and satisfies(p, EdgeConstraint(0, 2, 1, 1))
+    assert not satisfies(p, RangeConstraint(0, 1, 0, 1)) and satisfies(p, RangeConstraint(0, 1, 2, 5))
+    assert not satisfies(p, RangeConstraint(0, 3, 5, 7))  # parked inside the range
+    assert not satisfies(p, RangeConstraint(0, 3, 0, FOREVER))
+    assert satisfies(p, LengthConstraint(0, 2)) and not satisfies(p, LengthConstraint(0, 3))
+
+
+def test_constraint_content_does_not_depend_on_the_order():
+    a, b = VertexConstraint(0, 1, 2), EdgeConstraint(0, 1, 2, 3)
+    x, y = EMPTY.add(a).add(b), EMPTY.add(b, a)
+    assert x.key != y.key and x.content == y.content == frozenset({a, b})
+    assert x.parent.content == frozenset({a}) and EMPTY.content == frozenset()
+
+
+def brute_earliest(adj, s, target, cons, blocked, horizon=60):
+    """Earliest time at ``target`` by breadth-first search over (node, time) states."""
+    cc_forever = {c.node: c.start for c in cons if isinstance(c, RangeConstraint) and c.end >= FOREVER}
+    seen = {(s, 0)}
+    queue = deque([(s, 0)])
+    while queue:
+        v, t = queue.popleft()
+        if v == target:
+            return t
+        if t >= horizon:
+            continue
+        for w in [v] + adj[v]:
+            if w in blocked or not allowed(cons, w, t + 1):
+                continue
+            if w in cc_forever and t + 1 >= cc_forever[w]:
+                continue
+            if (w, t + 1) not in seen:
+                seen.add((w, t + 1))
+                queue.append((w, t + 1))
+    return UNREACHABLE
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_never_again_cut_offs_keep_the_low_level_exact(seed):
+    """Agents closed out of nodes for good: costs and earliest arrivals match brute force, and a
+    goal cut off for good is reported infeasible."""
+    rng = np.random.default_rng(100 + seed)
+    adj = grid(rng, 4, 4, 0.2)
+    n = len(adj)
+    if n < 5:
+        return
+    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
+    inst = MapfInstance(adj, [s], [g])
+    if inst.h[0][s] >= UNREACHABLE:
+        return
+    # even seeds close every neighbour of the goal (from early times: the goal may be cut off)
+    closed = adj[g] if seed % 2 == 0 else [int(x) for x in rng.choice(n, 2, replace=False)]
+    cons = [RangeConstraint(0, x, int(rng.integers(0, 8)), FOREVER) for x in closed if x not in (s, g)]
+    cs = EMPTY.add(*cons)
+    cc = compile_constraints(cs, n, g)
+    counter = Counter()
+    p = space_time_astar(inst, 0, cc, None, float("inf"), counter)
+    # no constraint touches the goal, so the optimal cost is the earliest arrival there
+    best = brute_earliest(adj, s, g, cons, frozenset())
+    if best >= UNREACHABLE:
+        assert p is None
+    else:
+        assert p is not None and p[-1][1] == best
+    target = int(rng.integers(n))
+    assert earliest_arrival(inst, 0, cc, target, frozenset(), float("inf"), counter) == \
+        brute_earliest(adj, s, target, cons, frozenset())
