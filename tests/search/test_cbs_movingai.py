@@ -10,7 +10,8 @@ from agents.search.mapf_grid import grid_graph, load_instance, load_map, load_sc
 from agents.search.validate import validate
 from baselines.cli import main
 
-DATA = Path("/work/shared/mapf")
+# the benchmark files live beside the repository (../shared/mapf from its root), when present
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "mapf"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="MovingAI benchmark files not available")
 
 
