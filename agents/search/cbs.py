@@ -44,6 +44,7 @@ Public API
 """
 from __future__ import annotations
 
+import gc
 import heapq
 import itertools
 import time as _time
@@ -1185,6 +1186,17 @@ class CBSSolver:
     # -------------------------------------------------------------- solve
     def solve(self) -> CBSResult:
         """Run the search and return a :class:`CBSResult` (never raises on a hard instance)."""
+        # the search allocates many small long-lived objects; with the default thresholds the
+        # cyclic garbage collector keeps rescanning them (about a fifth of the run time), so it
+        # runs less often during the search (the thresholds are restored afterwards)
+        old = gc.get_threshold()
+        gc.set_threshold(max(old[0], 100_000), max(old[1], 50), max(old[2], 100))
+        try:
+            return self._solve()
+        finally:
+            gc.set_threshold(*old)
+
+    def _solve(self) -> CBSResult:
         t0 = _time.perf_counter()
         inst = self.instance
         ctx = _Context(inst, t0 + self.time_limit, self)
