@@ -47,6 +47,8 @@ from __future__ import annotations
 import gc
 import heapq
 import itertools
+import os
+import sys
 import time as _time
 from dataclasses import asdict, dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -104,6 +106,27 @@ HEURISTICS = ("none", "cg", "dg", "wdg")
 _INF = 1 << 50
 #: how many constraint-set ancestors are searched for an MDD or pair result to reuse
 _ANCESTORS = 8
+#: the memory guard reads the process's resident size once every this many checks
+_MEMORY_CHECK_EVERY = 256
+
+
+def _rss_bytes() -> Optional[int]:
+    """The resident memory of this process in bytes, or ``None`` where it cannot be read.
+
+    Linux: the current resident size (``/proc/self/statm``). Elsewhere with :mod:`resource`:
+    the peak resident size, which only grows (still a valid guard). Otherwise ``None``.
+    """
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError, AttributeError):
+        pass
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak) if sys.platform == "darwin" else int(peak) * 1024
 
 
 # ---------------------------------------------------------------------------------- results
@@ -128,7 +151,7 @@ class CBSResult:
 
     Attributes:
         status: ``"optimal"``, ``"suboptimal"`` (ECBS; cost within ``suboptimality`` x optimum),
-            ``"timeout"`` (time or node limit reached first) or ``"infeasible"`` (proved).
+            ``"timeout"`` (time, memory or node limit reached first) or ``"infeasible"`` (proved).
         paths: per agent, the timed path ``[(node, time), ...]``: the agent is at ``node`` at
             ``time``; one entry per time step under unit time; arrivals and each waiting step
             under the durative model (between two entries ``(u, t), (v, t + d)`` with ``u != v``
@@ -262,6 +285,15 @@ class _Context:
         self.inst = inst
         self.deadline = deadline
         self.opt = options
+        #: resident-memory ceiling in bytes (the process's size at the start plus the limit)
+        self.memory_cap: Optional[int] = None
+        if options.memory_limit_mb is not None:
+            base = _rss_bytes()
+            if base is not None:
+                self.memory_cap = base + int(options.memory_limit_mb * (1 << 20))
+        self._checks = 0
+        #: ``"time"`` or ``"memory"``: which limit ended the search
+        self.stop_reason = "time"
         self.counter = Counter()
         self.mdds: Dict[Tuple[int, int], MDD] = {}
         self.pairs: Dict[Tuple[int, int, int, int], int] = {}
@@ -302,8 +334,16 @@ class _Context:
         return cc
 
     def check_time(self) -> None:
+        """Raise :class:`SearchTimeout` past the deadline or (checked now and then) the memory cap."""
         if _time.perf_counter() > self.deadline:
             raise SearchTimeout
+        if self.memory_cap is not None:
+            self._checks += 1
+            if self._checks % _MEMORY_CHECK_EVERY == 1:
+                rss = _rss_bytes()
+                if rss is not None and rss > self.memory_cap:
+                    self.stop_reason = "memory"
+                    raise SearchTimeout
 
 
 # ---------------------------------------------------------------------------------- vertex cover
@@ -1088,6 +1128,11 @@ class CBSSolver:
         grid_coords: ``(N, 2)`` integer (row, col) of every node of a 4-connected grid graph.
         vanilla: plain CBS (no prioritisation, bypass, target or symmetry reasoning, heuristic).
         time_limit: wall-clock seconds; the search ends with status ``"timeout"``.
+        memory_limit_mb: how much the process may grow (resident memory, MiB) during the
+            search; past it the search ends with status ``"timeout"`` and a message saying so,
+            instead of exhausting the machine's memory (long optimal searches keep every open
+            constraint-tree node). ``None`` turns the guard off; where the resident size cannot
+            be read (no ``/proc`` and no :mod:`resource`) there is no guard.
         node_limit: high-level expansions; the search ends with status ``"timeout"``.
         pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
             (past it the pair's lower bound is used, which keeps the heuristic admissible); an
@@ -1114,6 +1159,7 @@ class CBSSolver:
         grid_coords=None,
         vanilla: bool = False,
         time_limit: float = 60.0,
+        memory_limit_mb: Optional[float] = 4096.0,
         node_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,
@@ -1132,6 +1178,8 @@ class CBSSolver:
             raise ValueError(f"suboptimality must be >= 1, got {suboptimality!r}")
         if not (time_limit > 0):
             raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+        if memory_limit_mb is not None and not (memory_limit_mb > 0):
+            raise ValueError(f"memory_limit_mb must be > 0 (or None for no limit), got {memory_limit_mb!r}")
         if node_limit is not None and node_limit < 0:
             raise ValueError(f"node_limit must be >= 0, got {node_limit!r}")
         self.suboptimality = float(suboptimality)
@@ -1146,6 +1194,7 @@ class CBSSolver:
         if grid_coords is not None:
             GridGeometry(self.instance, grid_coords)  # validate now: a clear error early
         self.time_limit = float(time_limit)
+        self.memory_limit_mb = None if memory_limit_mb is None else float(memory_limit_mb)
         self.node_limit = node_limit
         self.pair_node_limit = int(pair_node_limit)
         self.pair_check_states = int(pair_check_states)
@@ -1228,8 +1277,12 @@ class CBSSolver:
             status, node = search.run_focal() if w > 1.0 else search.run()
         except SearchTimeout:
             lb = search.lower_bound or None
-            return finish(CBSResult("timeout", lower_bound=lb,
-                                    message=f"time limit of {self.time_limit:g} s reached"))
+            if ctx.stop_reason == "memory":
+                msg = (f"memory limit reached: the search grew the process by more than "
+                       f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
+            else:
+                msg = f"time limit of {self.time_limit:g} s reached"
+            return finish(CBSResult("timeout", lower_bound=lb, message=msg))
         if status == "infeasible":
             msg = ctx.infeasible_reason or "the constraint tree was exhausted: no solution exists"
             return finish(CBSResult("infeasible", message=msg))

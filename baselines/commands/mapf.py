@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vanilla", action="store_true",
                    help="plain CBS: no conflict prioritisation, bypass, target reasoning or heuristic")
     p.add_argument("--node-limit", type=int, default=None, metavar="N", help="high-level expansion limit")
+    p.add_argument("--memory-limit", type=float, default=4096.0, metavar="MIB",
+                   help="stop with status timeout once the search has grown the process by this many MiB "
+                        "(default 4096; 0 turns the guard off)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--paths-out", default=None, metavar="FILE",
                    help="write the paths as JSON: per agent, [row, col] at every time step until its final arrival")
@@ -39,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     # grid coordinates switch rectangle reasoning on (vanilla CBS ignores them)
     res = solve_cbs(inst.graph, inst.starts, inst.goals, time_limit=args.time_limit,
                     suboptimality=args.suboptimality, node_limit=args.node_limit,
+                    memory_limit_mb=args.memory_limit if args.memory_limit > 0 else None,
                     vanilla=args.vanilla, heuristic=args.heuristic, grid_coords=inst.cells)
     violations = validate(inst.graph, inst.starts, inst.goals, res.paths) if res.solved else None
     out = {

@@ -191,6 +191,45 @@ def test_time_and_node_limits_end_with_timeout():
     assert res.status == "timeout" and "node limit" in res.message
 
 
+def _dense_grid_instance():
+    h = w = 6
+    pairs = [(r * w + c, r * w + c + 1) for r in range(h) for c in range(w - 1)]
+    pairs += [(r * w + c, (r + 1) * w + c) for r in range(h - 1) for c in range(w)]
+    adj, _ = undirected(h * w, pairs)
+    rng = np.random.default_rng(0)
+    return adj, rng.choice(h * w, 20, replace=False).tolist(), rng.choice(h * w, 20, replace=False).tolist()
+
+
+@pytest.mark.parametrize("suboptimality", [1.0, 1.01])
+def test_memory_limit_ends_with_timeout_and_says_so(monkeypatch, suboptimality):
+    import agents.search.cbs as cbs_module
+
+    # a process that seems to grow by 1 MiB every time the guard looks at it
+    reads = iter(range(10**9))
+    monkeypatch.setattr(cbs_module, "_rss_bytes", lambda: next(reads) * (1 << 20))
+    adj, starts, goals = _dense_grid_instance()
+    res = solve_cbs(adj, starts, goals, time_limit=60, memory_limit_mb=3, suboptimality=suboptimality)
+    assert res.status == "timeout" and res.paths is None
+    assert "memory limit" in res.message and "3 MiB" in res.message
+    assert res.stats.hl_expanded > 0
+    # with the guard off the same search is stopped only by its node limit
+    res = solve_cbs(adj, starts, goals, time_limit=60, memory_limit_mb=None, node_limit=600,
+                    suboptimality=suboptimality)
+    assert "memory" not in res.message
+
+
+def test_memory_limit_reads_the_real_process_size():
+    import agents.search.cbs as cbs_module
+
+    rss = cbs_module._rss_bytes()
+    assert rss is None or rss > 1 << 20  # a Python process with numpy is larger than 1 MiB
+    adj, _ = undirected(4, [(0, 1), (1, 2), (2, 3)])
+    res = solve_cbs(adj, [0], [3], memory_limit_mb=64)
+    assert res.status == "optimal" and res.soc == 3
+    with pytest.raises(ValueError, match="memory_limit_mb"):
+        solve_cbs(adj, [0], [3], memory_limit_mb=0)
+
+
 def test_same_input_same_answer():
     adj, _ = undirected(9, [(0, 1), (1, 2), (3, 4), (4, 5), (6, 7), (7, 8), (0, 3), (3, 6), (1, 4), (4, 7),
                             (2, 5), (5, 8)])
