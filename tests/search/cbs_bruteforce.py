@@ -15,6 +15,8 @@ import heapq
 import itertools
 from typing import Dict, List, Optional, Sequence, Tuple
 
+import numpy as np
+
 Edges = Dict[Tuple[int, int], int]
 
 
@@ -108,3 +110,23 @@ def _compatible(si, ci, sj, cj, unit: bool, is_near) -> bool:
     # after the step both are at nodes or on edges; a finished agent occupies its goal for ever,
     # which the next step's occupancy check covers
     return True
+
+
+def random_grid(rng, h: int, w: int, p_block: float):
+    """A random 4-connected grid: ``(n, {(u, v): 1}, cells)``, each cell blocked with ``p_block``;
+    the edges of every cell are listed down, up, right, left."""
+    free = rng.random((h, w)) >= p_block
+    idx = -np.ones((h, w), int)
+    cells = []
+    for r in range(h):
+        for c in range(w):
+            if free[r, c]:
+                idx[r, c] = len(cells)
+                cells.append((r, c))
+    edges = {}
+    for r, c in cells:
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            r2, c2 = r + dr, c + dc
+            if 0 <= r2 < h and 0 <= c2 < w and free[r2, c2]:
+                edges[(int(idx[r, c]), int(idx[r2, c2]))] = 1
+    return len(cells), edges, np.array(cells)

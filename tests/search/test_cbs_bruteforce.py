@@ -4,7 +4,7 @@ import pytest
 
 from agents.search.cbs import Proximity, solve_cbs
 from agents.search.validate import validate
-from cbs_bruteforce import brute_force_soc
+from cbs_bruteforce import brute_force_soc, random_grid
 
 
 def random_graph(rng, n, p_edge, directed=False, max_dur=1):
@@ -23,24 +23,6 @@ def random_graph(rng, n, p_edge, directed=False, max_dur=1):
                 if not directed:
                     edges[(v, u)] = d
     return edges
-
-
-def random_grid(rng, h, w, p_block):
-    free = rng.random((h, w)) >= p_block
-    idx = -np.ones((h, w), int)
-    cells = []
-    for r in range(h):
-        for c in range(w):
-            if free[r, c]:
-                idx[r, c] = len(cells)
-                cells.append((r, c))
-    edges = {}
-    for r, c in cells:
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            r2, c2 = r + dr, c + dc
-            if 0 <= r2 < h and 0 <= c2 < w and free[r2, c2]:
-                edges[(int(idx[r, c]), int(idx[r2, c2]))] = 1
-    return len(cells), edges, np.array(cells)
 
 
 def adjacency(n, edges):

@@ -24,23 +24,15 @@ from agents.search.constraints import (
     compile_constraints,
 )
 from agents.search.mapf_instance import UNREACHABLE, MapfInstance
+from cbs_bruteforce import random_grid
 
 
 def grid(rng, h, w, p_block):
-    free = rng.random((h, w)) >= p_block
-    idx = -np.ones((h, w), int)
-    cells = []
-    for r in range(h):
-        for c in range(w):
-            if free[r, c]:
-                idx[r, c] = len(cells)
-                cells.append((r, c))
-    adj = [[] for _ in cells]
-    for k, (r, c) in enumerate(cells):
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            r2, c2 = r + dr, c + dc
-            if 0 <= r2 < h and 0 <= c2 < w and free[r2, c2]:
-                adj[k].append(int(idx[r2, c2]))
+    """A random 4-connected grid as an adjacency list of neighbours."""
+    n, edges, _ = random_grid(rng, h, w, p_block)
+    adj = [[] for _ in range(n)]
+    for u, v in edges:
+        adj[u].append(v)
     return adj
 
 

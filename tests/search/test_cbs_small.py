@@ -175,29 +175,23 @@ def test_proximity_keeps_agents_apart():
     assert res.status == "infeasible" and "closer than" in res.message
 
 
-def test_time_and_node_limits_end_with_timeout():
-    # a dense open grid with many agents: not solvable in a millisecond
-    h = w = 6
-    pairs = [(r * w + c, r * w + c + 1) for r in range(h) for c in range(w - 1)]
-    pairs += [(r * w + c, (r + 1) * w + c) for r in range(h - 1) for c in range(w)]
-    adj, _ = undirected(h * w, pairs)
-    rng = np.random.default_rng(0)
-    starts = rng.choice(h * w, 20, replace=False).tolist()
-    goals = rng.choice(h * w, 20, replace=False).tolist()
-    res = solve_cbs(adj, starts, goals, time_limit=0.02)
-    assert res.status == "timeout" and res.paths is None and "time limit" in res.message
-    assert res.stats.runtime_s < 1.0
-    res = solve_cbs(adj, starts, goals, node_limit=0, time_limit=30)
-    assert res.status == "timeout" and "node limit" in res.message
-
-
 def _dense_grid_instance():
+    """A 6 x 6 open grid with 20 agents: not solvable in a millisecond."""
     h = w = 6
     pairs = [(r * w + c, r * w + c + 1) for r in range(h) for c in range(w - 1)]
     pairs += [(r * w + c, (r + 1) * w + c) for r in range(h - 1) for c in range(w)]
     adj, _ = undirected(h * w, pairs)
     rng = np.random.default_rng(0)
     return adj, rng.choice(h * w, 20, replace=False).tolist(), rng.choice(h * w, 20, replace=False).tolist()
+
+
+def test_time_and_node_limits_end_with_timeout():
+    adj, starts, goals = _dense_grid_instance()
+    res = solve_cbs(adj, starts, goals, time_limit=0.02)
+    assert res.status == "timeout" and res.paths is None and "time limit" in res.message
+    assert res.stats.runtime_s < 1.0
+    res = solve_cbs(adj, starts, goals, node_limit=0, time_limit=30)
+    assert res.status == "timeout" and "node limit" in res.message
 
 
 @pytest.mark.parametrize("suboptimality", [1.0, 1.01])
