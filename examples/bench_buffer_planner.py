@@ -4,10 +4,11 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
 
 - the time to build the graph for N observations with the full critic ensembles (3 distance
   + 3 cost critics; D and C for all N^2 pairs, then pruning at d_max = 7);
-- CBS for K agents on that graph (durative edges, learned proximity radius 1.5, no cost
-  pruning): median and worst planning time over P problems (hard difficulty), for optimal CBS
-  and for ECBS with w = 1.1 (the planner's default), without the planner's fallback, with
-  the status counts. Planning time includes attaching the starts and goals with the critics.
+- CBS for K agents on that graph (learned proximity radius 1.5, no cost pruning): median and
+  worst planning time over P problems (hard difficulty), with the status counts, for optimal
+  CBS and ECBS with w = 1.1 (the planner's default) with durative edges, and for optimal CBS
+  with unit-time edges (the paper's time model: every edge one step), all without the
+  planner's fallback. Planning time includes attaching the starts and goals with the critics.
 
 Run: ``python examples/bench_buffer_planner.py [--nodes 1000] [--agents 5 10 20] [--problems 20]``
 """
@@ -47,15 +48,15 @@ def main() -> None:
 
     for k in args.agents:
         problems = make_problems(setup, args.difficulty, k, args.problems, seed=args.seed)
-        for w in (1.0, 1.1):
+        for w, time_model in ((1.0, "durative"), (1.1, "durative"), (1.0, "unit")):
             planner = setup.planner.with_options(suboptimality=w, time_limit=args.time_limit,
-                                                 fallback_suboptimality=None)
+                                                 fallback_suboptimality=None, time_model=time_model)
             times, status = [], collections.Counter()
             for p in problems:
                 plan = planner.plan(setup.observations[p.start_nodes], setup.observations[p.goal_nodes])
                 times.append(plan.planning_time)
                 status[plan.status] += 1
-            name = "optimal CBS" if w == 1.0 else f"ECBS w={w}"
+            name = ("optimal CBS" if w == 1.0 else f"ECBS w={w}") + f", {time_model} edges"
             print(f"{name}, {k} agents, {args.difficulty}: median {np.median(times):.2f} s, "
                   f"worst {max(times):.2f} s (limit {args.time_limit:g} s), {dict(status)}")
 
