@@ -108,6 +108,8 @@ _INF = 1 << 50
 _ANCESTORS = 8
 #: the memory guard reads the process's resident size once every this many checks
 _MEMORY_CHECK_EVERY = 256
+#: default ``memory_limit_mb``: how much a search may grow the process (MiB)
+DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
 
 def _rss_bytes() -> Optional[int]:
@@ -1159,7 +1161,7 @@ class CBSSolver:
         grid_coords=None,
         vanilla: bool = False,
         time_limit: float = 60.0,
-        memory_limit_mb: Optional[float] = 4096.0,
+        memory_limit_mb: Optional[float] = DEFAULT_MEMORY_LIMIT_MB,
         node_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,

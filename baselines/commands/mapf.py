@@ -19,9 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vanilla", action="store_true",
                    help="plain CBS: no conflict prioritisation, bypass, target reasoning or heuristic")
     p.add_argument("--node-limit", type=int, default=None, metavar="N", help="high-level expansion limit")
-    p.add_argument("--memory-limit", type=float, default=4096.0, metavar="MIB",
+    p.add_argument("--memory-limit", type=float, default=None, metavar="MIB",
                    help="stop with status timeout once the search has grown the process by this many MiB "
-                        "(default 4096; 0 turns the guard off)")
+                        "(default: the solver's, agents.search.cbs.DEFAULT_MEMORY_LIMIT_MB; 0 turns the guard off)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--paths-out", default=None, metavar="FILE",
                    help="write the paths as JSON: per agent, [row, col] at every time step until its final arrival")
@@ -32,17 +32,18 @@ def run(args: argparse.Namespace) -> int:
     """Solve the first K agents of a MovingAI scenario (4-connected moves and waits, vertex and
     swap conflicts, agents stay at their goal, sum of costs) and report status, sum of costs,
     makespan, runtime and search statistics. Exit code 0 when solved, 1 otherwise."""
-    from agents.search.cbs import solve_cbs
+    from agents.search.cbs import DEFAULT_MEMORY_LIMIT_MB, solve_cbs
     from agents.search.mapf_grid import load_instance
     from agents.search.validate import validate
 
     if args.agents < 1:
         raise ValueError(f"--agents must be >= 1, got {args.agents}")
     inst = load_instance(args.map, args.scen, args.agents)
+    memory = DEFAULT_MEMORY_LIMIT_MB if args.memory_limit is None else (args.memory_limit or None)
     # grid coordinates switch rectangle reasoning on (vanilla CBS ignores them)
     res = solve_cbs(inst.graph, inst.starts, inst.goals, time_limit=args.time_limit,
                     suboptimality=args.suboptimality, node_limit=args.node_limit,
-                    memory_limit_mb=args.memory_limit if args.memory_limit > 0 else None,
+                    memory_limit_mb=memory,
                     vanilla=args.vanilla, heuristic=args.heuristic, grid_coords=inst.cells)
     violations = validate(inst.graph, inst.starts, inst.goals, res.paths) if res.solved else None
     out = {
