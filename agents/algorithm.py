@@ -46,7 +46,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 import safe_mapf_envs  # noqa: F401  (registers the environment ids)
 
-from .buffers import GoalCostReplayBuffer, check_goal_space
+from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
 from .distributional import categorical_projection, shift_distance_target
 from .lagrangian import LagrangeMultiplier
 from .policies import SafeGoalPolicy, aggregate_ensemble
@@ -92,6 +92,32 @@ def _rich_available() -> bool:
     return True
 
 
+class RandomShift:
+    """DrQ's random-shift augmentation for batches of image stacks ``(B, ..., H, W, C)``.
+
+    Each sample is padded by ``pad`` pixels (edge values repeated) and cropped back to ``H x W``
+    at a random offset, the same offset for all of a sample's views.
+    """
+
+    def __init__(self, pad: int = 2, generator: Optional[th.Generator] = None) -> None:
+        self.pad = int(pad)
+        self.generator = generator
+
+    def __call__(self, x: th.Tensor) -> th.Tensor:
+        if self.pad == 0:
+            return x
+        b, h, w = x.shape[0], x.shape[-3], x.shape[-2]
+        p = self.pad
+        flat = x.reshape(b, -1, h, w, x.shape[-1])
+        rows = th.arange(h).unsqueeze(0) + th.randint(0, 2 * p + 1, (b, 1), generator=self.generator)
+        cols = th.arange(w).unsqueeze(0) + th.randint(0, 2 * p + 1, (b, 1), generator=self.generator)
+        rows, cols = (rows - p).clamp_(0, h - 1), (cols - p).clamp_(0, w - 1)  # edge padding
+        bi = th.arange(b).view(b, 1, 1, 1)
+        vi = th.arange(flat.shape[1]).view(1, -1, 1, 1)
+        out = flat[bi, vi, rows.view(b, 1, h, 1), cols.view(b, 1, 1, w)]
+        return out.reshape(x.shape)
+
+
 class SafeGoalTD3(OffPolicyAlgorithm):
     """Goal-conditioned safe TD3 with distributional distance and cost critics.
 
@@ -125,6 +151,10 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             :class:`~agents.self_sampling.ProblemSampler`.
         problem_sampler_kwargs: keyword arguments of a named sampler.
         env_id: the environment id recorded in checkpoints (default: from ``env``).
+        augmentation: ``None`` or ``"shift"``: DrQ's random-shift augmentation of image
+            observations (pad each view by ``shift_pad`` pixels, crop back at a random offset)
+            for the shared-encoder layout; ignored for vector observations.
+        shift_pad: the largest shift of ``"shift"``, in pixels.
         stats_window_size, tensorboard_log, policy_kwargs, verbose, seed, device: as in SB3.
 
     The discount is fixed to 1 (distances count steps); the episode's time limit keeps
@@ -165,6 +195,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         problem_sampler: Union[str, ProblemSampler, None] = "self",
         problem_sampler_kwargs: Optional[Dict[str, Any]] = None,
         env_id: Optional[str] = None,
+        augmentation: Optional[str] = None,
+        shift_pad: int = 2,
         stats_window_size: int = 100,
         tensorboard_log: Optional[str] = None,
         policy_kwargs: Optional[Dict[str, Any]] = None,
@@ -187,6 +219,10 @@ class SafeGoalTD3(OffPolicyAlgorithm):
                         ("lagrange_update_episodes", lagrange_update_episodes)):
             if int(v) < 1:
                 raise ValueError(f"{name} must be >= 1, got {v!r}")
+        if augmentation not in (None, "shift"):
+            raise ValueError(f"augmentation must be None or 'shift', got {augmentation!r}")
+        if int(shift_pad) < 0:
+            raise ValueError(f"shift_pad must be >= 0, got {shift_pad!r}")
         if actor_aggregate not in ("mean", "max", "min"):
             raise ValueError(f"actor_aggregate must be 'mean', 'max' or 'min', got {actor_aggregate!r}")
         super().__init__(
@@ -197,6 +233,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             seed=seed, sde_support=False, supported_action_spaces=(spaces.Box,), support_multi_env=True,
         )
         self.env_id = env_id
+        self.augmentation = augmentation
+        self.shift_pad = int(shift_pad)
         self.actor_learning_rate = actor_learning_rate
         self.cost_learning_rate = cost_learning_rate
         self.policy_delay = int(policy_delay)
@@ -232,6 +270,9 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             self.replay_buffer.set_env(self.env)
             self.replay_buffer.seed(self.seed)
         self._create_aliases()
+        self.augment = None
+        if getattr(self, "augmentation", None) == "shift" and self.policy.share_encoder:
+            self.augment = RandomShift(self.shift_pad, th.Generator().manual_seed(self.seed or 0))
         self._sampler = make_sampler(self.problem_sampler, **self.problem_sampler_kwargs)
         self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate if self.actor_learning_rate is not None
                                                else self.learning_rate)
@@ -339,62 +380,19 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         update_learning_rate(self.actor.optimizer, self.actor_lr_schedule(progress))
         self._maybe_update_lagrangian()
         lam = self.lagrangian.value if self.constrained else 0.0
-        d_losses, c_losses, a_losses, pred_d, pred_c = [], [], [], [], []
+        d_losses, c_losses, a_losses, pred_d = [], [], [], []
+        step = self._shared_encoder_step if self.policy.share_encoder else self._separate_encoders_step
         for _ in range(gradient_steps):
             self._n_updates += 1
             data = self.replay_buffer.sample(batch_size)
-            obs, next_obs = data.observations, data.next_observations
-            e_d, e_c = self.critic.n_members, self.cost_critic.n_members
-            with th.no_grad():
-                next_actions = self.actor_target(next_obs)
-                if self.target_policy_noise > 0:
-                    noise = th.randn_like(next_actions) * self.target_policy_noise
-                    next_actions = (next_actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)).clamp(-1, 1)
-                dones = data.dones.reshape(1, -1)
-                next_d = th.softmax(self.critic_target(next_obs, next_actions), dim=-1)
-                target_d = shift_distance_target(next_d, dones.expand(e_d, -1))
-                next_c = th.softmax(self.cost_critic_target(next_obs, next_actions), dim=-1)
-                costs = data.costs.reshape(1, -1).expand(e_c, -1)
-                target_c = categorical_projection(next_c, costs, dones.expand(e_c, -1), self.cost_critic.support)
-
-            logits_d = self.critic(obs, data.actions)
-            d_loss = -(target_d * th.log_softmax(logits_d, dim=-1)).sum(-1).mean(-1).sum()
-            self.critic.optimizer.zero_grad()
-            d_loss.backward()
-            self.critic.optimizer.step()
-
-            logits_c = self.cost_critic(obs, data.actions)
-            c_loss = -(target_c * th.log_softmax(logits_c, dim=-1)).sum(-1).mean(-1).sum()
-            self.cost_critic.optimizer.zero_grad()
-            c_loss.backward()
-            self.cost_critic.optimizer.step()
-            d_losses.append(d_loss.item())
-            c_losses.append(c_loss.item())
-
-            if self._n_updates % self.policy_delay == 0:
-                actions = self.actor(obs)
-                with th.no_grad():
-                    feats_d = self.critic.extract_features(obs)
-                dist = aggregate_ensemble(self.critic.expected(self.critic.logits_from_features(feats_d, actions)),
-                                  self.actor_aggregate)
-                if lam > 0:
-                    with th.no_grad():
-                        feats_c = self.cost_critic.extract_features(obs)
-                    cost = aggregate_ensemble(self.cost_critic.expected(self.cost_critic.logits_from_features(feats_c, actions)),
-                                      self.actor_aggregate)
-                    a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
-                else:
-                    a_loss = dist.mean()
-                self.actor.optimizer.zero_grad()
-                a_loss.backward()
-                self.actor.optimizer.step()
-                a_losses.append(a_loss.item())
-                pred_d.append(dist.mean().item())
-
+            d_loss, c_loss, actor_out = step(data, lam, self._n_updates % self.policy_delay == 0)
+            d_losses.append(d_loss)
+            c_losses.append(c_loss)
+            if actor_out is not None:
+                a_losses.append(actor_out[0])
+                pred_d.append(actor_out[1])
             if self._n_updates % self.target_update_interval == 0:
-                polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
-                polyak_update(self.cost_critic.parameters(), self.cost_critic_target.parameters(), self.tau)
-                polyak_update(self.actor.parameters(), self.actor_target.parameters(), self.tau)
+                polyak_update(*self.policy.target_parameter_pairs(), self.tau)
 
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/distance_critic_loss", float(np.mean(d_losses)))
@@ -403,6 +401,99 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             self.logger.record("train/actor_loss", float(np.mean(a_losses)))
             self.logger.record("train/predicted_distance", float(np.mean(pred_d)))
         self.logger.record("train/lambda", self.lagrangian.value)
+
+    def _targets(self, data: GoalCostSamples, f_actor: th.Tensor, f_d: th.Tensor,
+                 f_c: th.Tensor) -> Tuple[th.Tensor, th.Tensor]:
+        """Target distributions of the distance and cost critics from the next step's features as
+        seen by the target actor, distance critic and cost critic (call without gradients)."""
+        next_actions = self.actor_target.action_from_features(f_actor)
+        if self.target_policy_noise > 0:
+            noise = th.randn_like(next_actions) * self.target_policy_noise
+            next_actions = (next_actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)).clamp(-1, 1)
+        e_d, e_c = self.critic.n_members, self.cost_critic.n_members
+        dones = data.dones.reshape(1, -1)
+        next_d = th.softmax(self.critic_target.logits_from_features(f_d, next_actions), dim=-1)
+        target_d = shift_distance_target(next_d, dones.expand(e_d, -1))
+        next_c = th.softmax(self.cost_critic_target.logits_from_features(f_c, next_actions), dim=-1)
+        costs = data.costs.reshape(1, -1).expand(e_c, -1)
+        target_c = categorical_projection(next_c, costs, dones.expand(e_c, -1), self.cost_critic.support)
+        return target_d, target_c
+
+    @staticmethod
+    def _cross_entropy(target: th.Tensor, logits: th.Tensor) -> th.Tensor:
+        """Cross-entropy summed over ensemble members, averaged over the batch."""
+        return -(target * th.log_softmax(logits, dim=-1)).sum(-1).mean(-1).sum()
+
+    def _actor_step(self, f_actor: th.Tensor, f_d: th.Tensor, f_c: th.Tensor, lam: float) -> Tuple[float, float]:
+        """One actor update: minimise the predicted distance (plus ``lam`` times the cost)
+        of its action, with the critics' features ``f_d``/``f_c`` held fixed."""
+        actions = self.actor.action_from_features(f_actor)
+        dist = aggregate_ensemble(self.critic.expected(self.critic.logits_from_features(f_d, actions)),
+                                  self.actor_aggregate)
+        if lam > 0:
+            cost = aggregate_ensemble(self.cost_critic.expected(self.cost_critic.logits_from_features(f_c, actions)),
+                                      self.actor_aggregate)
+            a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
+        else:
+            a_loss = dist.mean()
+        self.actor.optimizer.zero_grad()
+        a_loss.backward()
+        self.actor.optimizer.step()
+        return a_loss.item(), dist.mean().item()
+
+    def _separate_encoders_step(self, data: GoalCostSamples, lam: float, update_actor: bool):
+        """One update with an extractor per network (the vector agents' layout)."""
+        obs, next_obs = data.observations, data.next_observations
+        with th.no_grad():
+            target_d, target_c = self._targets(
+                data, self.actor_target.extract_features(next_obs), self.critic_target.extract_features(next_obs),
+                self.cost_critic_target.extract_features(next_obs))
+        d_loss = self._cross_entropy(target_d, self.critic(obs, data.actions))
+        self.critic.optimizer.zero_grad()
+        d_loss.backward()
+        self.critic.optimizer.step()
+        c_loss = self._cross_entropy(target_c, self.cost_critic(obs, data.actions))
+        self.cost_critic.optimizer.zero_grad()
+        c_loss.backward()
+        self.cost_critic.optimizer.step()
+        actor_out = None
+        if update_actor:
+            with th.no_grad():
+                f_d = self.critic.extract_features(obs)
+                f_c = self.cost_critic.extract_features(obs) if lam > 0 else f_d
+            actor_out = self._actor_step(self.actor.extract_features(obs), f_d, f_c, lam)
+        return d_loss.item(), c_loss.item(), actor_out
+
+    def _shared_encoder_step(self, data: GoalCostSamples, lam: float, update_actor: bool):
+        """One update of the shared-encoder layout (pixel-based off-policy RL, after SAC-AE/DrQ).
+
+        The observation and the goal are encoded in one batched pass by the online encoder,
+        which the distance and cost losses train together (one backward pass); the next
+        observation and the goal are encoded by the Polyak target encoder without gradients;
+        the actor reads the online features detached, so its loss never reaches the encoder.
+        """
+        enc, enc_t = self.policy.encoder, self.policy.encoder_target
+        obs, goal = data.observations["observation"], data.observations["desired_goal"]
+        next_obs = data.next_observations["observation"]
+        b = obs.shape[0]
+        if self.augment is not None:
+            obs, goal, next_obs = (self.augment(x) for x in (obs, goal, next_obs))
+        with th.no_grad():
+            next_feats = th.cat(enc_t.encode(th.cat([next_obs, goal], 0)).split([b, b]), 1)
+            target_d, target_c = self._targets(data, next_feats, next_feats, next_feats)
+        feats = th.cat(enc.encode(th.cat([obs, goal], 0)).split([b, b]), 1)
+        d_loss = self._cross_entropy(target_d, self.critic.logits_from_features(feats, data.actions))
+        c_loss = self._cross_entropy(target_c, self.cost_critic.logits_from_features(feats, data.actions))
+        self.critic.optimizer.zero_grad()
+        self.cost_critic.optimizer.zero_grad()
+        (d_loss + c_loss).backward()
+        self.critic.optimizer.step()
+        self.cost_critic.optimizer.step()
+        actor_out = None
+        if update_actor:
+            f = feats.detach()
+            actor_out = self._actor_step(f, f, f, lam)
+        return d_loss.item(), c_loss.item(), actor_out
 
     def dump_logs(self) -> None:
         if self.ep_cost_buffer:
@@ -447,7 +538,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
     def _excluded_save_params(self) -> List[str]:
         excluded = super()._excluded_save_params() + [
             "actor", "actor_target", "critic", "critic_target", "cost_critic", "cost_critic_target",
-            "_sampler", "_episode_cost_acc", "actor_lr_schedule", "cost_lr_schedule",
+            "_sampler", "_episode_cost_acc", "actor_lr_schedule", "cost_lr_schedule", "augment",
         ]
         if not isinstance(self.problem_sampler, (str, type(None))):
             excluded.append("problem_sampler")

@@ -78,6 +78,9 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         her_ratio: fraction of sampled transitions whose goal is a future achieved goal.
         random_goal_ratio: fraction whose goal is the achieved goal of a random transition.
         seed: seed of the buffer's own random generator.
+        achieved_goal_is_observation: the environment's ``achieved_goal`` is always its
+            ``observation`` (true of every environment of this project): store it once. For
+            panoramas this saves a third of the buffer's memory.
     """
 
     def __init__(
@@ -93,6 +96,7 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         her_ratio: float = 0.5,
         random_goal_ratio: float = 0.0,
         seed: Optional[int] = None,
+        achieved_goal_is_observation: bool = False,
     ) -> None:
         check_goal_space(observation_space)
         if optimize_memory_usage:
@@ -115,6 +119,12 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         self._current_ep_start = np.zeros(self.n_envs, dtype=np.int64)
         self.positions: Optional[np.ndarray] = None
         self.goal_positions: Optional[np.ndarray] = None
+        self.achieved_goal_is_observation = bool(achieved_goal_is_observation)
+        if self.achieved_goal_is_observation:
+            if observation_space["achieved_goal"] != observation_space["observation"]:
+                raise ValueError("achieved_goal_is_observation=True needs equal achieved_goal and observation spaces")
+            for store in (self.observations, self.next_observations):
+                store["achieved_goal"] = store["observation"]  # one array; add() writes it twice
 
     # ------------------------------------------------------------------ bookkeeping
     def seed(self, seed: Optional[int]) -> None:
@@ -175,6 +185,62 @@ class GoalCostReplayBuffer(DictReplayBuffer):
             self.ep_length[idx, e] = end - start
             self._current_ep_start[e] = self.pos
 
+    # ------------------------------------------------------------------ save / load (resume)
+    _STATE = ("actions", "rewards", "dones", "timeouts", "costs", "ep_start", "ep_length")
+
+    def save_arrays(self, path: str) -> None:
+        """Write the stored transitions (the filled part only) to an uncompressed ``.npz``.
+
+        Used to resume a training run; :meth:`load_arrays` restores them into a buffer of the
+        same spaces (and at least the same capacity).
+        """
+        n = self.buffer_size if self.full else self.pos
+        arrays: Dict[str, np.ndarray] = {}
+        for prefix, store in (("obs", self.observations), ("next_obs", self.next_observations)):
+            for k, v in store.items():
+                if not (k == "achieved_goal" and self.achieved_goal_is_observation):
+                    arrays[f"{prefix}/{k}"] = v[:n]
+        for k in self._STATE:
+            arrays[k] = getattr(self, k)[:n]
+        if self.positions is not None:
+            arrays["positions"], arrays["goal_positions"] = self.positions[:n], self.goal_positions[:n]
+        arrays["meta"] = np.array([self.pos, int(self.full), self.buffer_size, self.n_envs], dtype=np.int64)
+        tmp = path + ".tmp.npz"
+        np.savez(tmp, **arrays)
+        import os
+
+        os.replace(tmp, path)
+
+    def load_arrays(self, path: str) -> None:
+        """Restore transitions written by :meth:`save_arrays` (``ValueError`` if they do not fit)."""
+        try:
+            data = np.load(path)
+            pos, full, size, n_envs = (int(v) for v in data["meta"])
+        except Exception as exc:  # noqa: BLE001 (a corrupt file of any kind)
+            raise ValueError(f"{path} is not a readable replay-buffer file: {exc}") from exc
+        if size != self.buffer_size or n_envs != self.n_envs:
+            raise ValueError(f"{path} holds a buffer of {size} x {n_envs} transitions, this one is "
+                             f"{self.buffer_size} x {self.n_envs}")
+        n = size if full else pos
+        for prefix, store in (("obs", self.observations), ("next_obs", self.next_observations)):
+            for k, v in store.items():
+                if k == "achieved_goal" and self.achieved_goal_is_observation:
+                    continue
+                src = data[f"{prefix}/{k}"]
+                if src.shape[1:] != v.shape[1:]:
+                    raise ValueError(f"{path}: {prefix}/{k} has shape {src.shape[1:]}, expected {v.shape[1:]}")
+                v[:n] = src
+        for k in self._STATE:
+            getattr(self, k)[:n] = data[k]
+        if "positions" in data:
+            p = data["positions"]
+            self.positions = np.zeros((self.buffer_size, self.n_envs, *p.shape[2:]), dtype=np.float32)
+            self.goal_positions = np.zeros_like(self.positions)
+            self.positions[:n], self.goal_positions[:n] = p, data["goal_positions"]
+        self.pos, self.full = pos, bool(full)
+        # The run resumes with fresh episodes: an episode unfinished at the save stays unsampleable.
+        self._current_ep_start = np.full(self.n_envs, self.pos, dtype=np.int64)
+
     def n_complete_transitions(self) -> int:
         """Transitions of finished episodes (the ones that can be sampled)."""
         return int(np.count_nonzero(self.ep_length > 0))
@@ -224,7 +290,9 @@ class GoalCostReplayBuffer(DictReplayBuffer):
                 next_obs["achieved_goal"][relabelled], goals[relabelled], info)
         obs["desired_goal"] = goals
         next_obs["desired_goal"] = goals
-        to = self.to_torch
+
+        def to(a: np.ndarray) -> th.Tensor:  # the arrays are fresh copies: no second copy
+            return self.to_torch(a, copy=False)
         return GoalCostSamples(
             observations={k: to(v) for k, v in obs.items()},
             actions=to(self.actions[t, e]),

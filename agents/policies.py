@@ -62,9 +62,19 @@ class PanoramaEncoder(nn.Module):
 
     Input: a batch of panoramas of shape ``(B, views, H, W, C)`` (channels last, e.g.
     ``(4, 32, 32, 4)``: four RGB-D views) or single images ``(B, H, W, C)``. Each view goes
-    through the same convolutions (``(filters, kernel, stride)`` per layer); the flattened
-    views are concatenated and mapped by one fully connected layer. ``uint8`` inputs are
-    scaled to ``[0, 1]``.
+    through the same convolutions (``(filters, kernel, stride)`` per layer, no padding); the
+    flattened views are concatenated and mapped by one fully connected layer. ``uint8``
+    inputs are scaled to ``[0, 1]``.
+
+    Two exact shortcuts make it several times cheaper than a plain ``nn.Conv2d`` stack on a
+    CPU (the parameters are the ``nn.Conv2d`` ones, so outputs and checkpoints are the same):
+
+    - only the pixels inside the stack's receptive field are read. Without padding, the last
+      rows and columns a strided stack cannot reach never influence the output (the paper's
+      layers on 32 x 32 views read the top-left 20 x 20 pixels of each view);
+    - the first convolution runs as one matrix product over strided patches of the
+      channels-last ``uint8`` input (no permute, no float copy of the unread pixels), and a
+      later layer whose kernel covers its whole input runs as a linear layer.
     """
 
     def __init__(
@@ -77,10 +87,13 @@ class PanoramaEncoder(nn.Module):
         super().__init__()
         if len(obs_shape) not in (3, 4):
             raise ValueError(f"PanoramaEncoder expects (views, H, W, C) or (H, W, C) observations, got shape {obs_shape}")
+        if not conv_layers:
+            raise ValueError("PanoramaEncoder needs at least one convolution, got conv_layers=[]")
         self.obs_shape = tuple(int(s) for s in obs_shape)
         views, h, w, c = (1, *self.obs_shape) if len(obs_shape) == 3 else self.obs_shape
         self.views, self.scale = views, float(scale)
         layers: List[nn.Module] = []
+        sizes: List[Tuple[int, int]] = []  # feature-map size after each layer
         in_ch = c
         for filters, kernel, stride in conv_layers:
             if kernel > min(h, w):
@@ -88,11 +101,50 @@ class PanoramaEncoder(nn.Module):
             layers += [nn.Conv2d(in_ch, int(filters), int(kernel), stride=int(stride)), nn.ReLU()]
             in_ch = int(filters)
             h, w = (h - kernel) // stride + 1, (w - kernel) // stride + 1
+            sizes.append((h, w))
         self.cnn = nn.Sequential(*layers, nn.Flatten())
         self.fc = nn.Sequential(nn.Linear(views * in_ch * h * w, int(features_dim)), nn.ReLU())
         self.output_dim = int(features_dim)
+        self._convs = [m for m in layers if isinstance(m, nn.Conv2d)]
+        # Receptive field, from the last layer back: the part of each feature map (and of the
+        # input) that later layers read; the rest never influences the output.
+        used = [sizes[-1]]
+        for conv in reversed(self._convs):
+            k, s = conv.kernel_size[0], conv.stride[0]
+            used.insert(0, ((used[0][0] - 1) * s + k, (used[0][1] - 1) * s + k))
+        self.read_size: Tuple[int, int] = used[0]
+        self._sizes = used[1:]  # the output size of each layer on the read part
 
     def forward(self, x: th.Tensor) -> th.Tensor:
+        b = x.shape[0]
+        rh, rw = self.read_size
+        x = x.reshape(b * self.views, *x.shape[-3:])[:, :rh, :rw, :]  # (N, H', W', C), channels last
+        first = self._convs[0]
+        uint8 = x.dtype == th.uint8
+        k, s = first.kernel_size[0], first.stride[0]
+        oh, ow = self._sizes[0]
+        n, _, _, c = x.shape
+        x = x.to(th.float32).contiguous()  # (a uint8 input is scaled through the weight below)
+        st = x.stride()
+        patches = x.as_strided((n, oh, ow, k, k, c), (st[0], s * st[1], s * st[2], st[1], st[2], st[3]))
+        patches = patches.reshape(n * oh * ow, k * k * c)
+        weight = first.weight.permute(0, 2, 3, 1).reshape(first.out_channels, k * k * c)
+        if uint8 and self.scale != 1.0:
+            weight = weight * self.scale
+        h = th.relu(th.addmm(first.bias, patches, weight.t())).view(n, oh, ow, first.out_channels)
+        for conv, (oh, ow) in zip(self._convs[1:], self._sizes[1:]):
+            kh, kw = conv.kernel_size
+            if (kh, kw) == tuple(h.shape[1:3]):  # the kernel covers the map: a linear layer
+                wt = conv.weight.permute(0, 2, 3, 1).reshape(conv.out_channels, -1)
+                h = th.relu(th.addmm(conv.bias, h.reshape(n, -1), wt.t())).view(n, 1, 1, conv.out_channels)
+            else:
+                h = th.relu(conv(h.permute(0, 3, 1, 2))).permute(0, 2, 3, 1)
+        # flatten in the (C, H, W) order of nn.Flatten on NCHW maps, as the FC layer expects
+        h = h.permute(0, 3, 1, 2).reshape(b, -1)
+        return self.fc(h)
+
+    def reference_forward(self, x: th.Tensor) -> th.Tensor:
+        """The same function as a plain ``nn.Conv2d`` stack over the full views (for tests)."""
         b = x.shape[0]
         x = x.float() * self.scale if x.dtype == th.uint8 else x.float()
         x = x.reshape(b * self.views, *x.shape[-3:]).permute(0, 3, 1, 2)
@@ -296,6 +348,15 @@ class SafeGoalPolicy(BasePolicy):
             largest representable distance, use the episode step limit.
         n_cost_bins: atoms of the cost distribution.
         cost_max: the largest atom of the cost distribution (the smallest is 0).
+        share_encoder: one observation encoder for actor and critics (the recipe of pixel-based
+            off-policy RL: SAC-AE, DrQ), trained by the critic losses only, the actor reading
+            its features detached, and one Polyak copy of it under every target network. With
+            ``False`` each of the six networks has its own extractor (the layout of the vector
+            agents). ``None`` (default): shared for image observations, separate for vectors.
+
+    The encoder of the shared layout is :attr:`encoder` (target: :attr:`encoder_target`);
+    ``actor.features_extractor``, ``critic.features_extractor`` and
+    ``cost_critic.features_extractor`` are that same module.
     """
 
     actor: GoalActor
@@ -322,6 +383,7 @@ class SafeGoalPolicy(BasePolicy):
         n_distance_bins: int = 20,
         n_cost_bins: int = 40,
         cost_max: float = 40.0,
+        share_encoder: Optional[bool] = None,
     ) -> None:
         check_goal_space(observation_space)
         if not isinstance(action_space, spaces.Box):
@@ -353,41 +415,76 @@ class SafeGoalPolicy(BasePolicy):
         self.cost_max = float(cost_max)
         self._distance_support = distance_support(self.n_distance_bins)
         self._cost_support = cost_support(self.n_cost_bins, self.cost_max)
+        if share_encoder is None:
+            share_encoder = _is_image_space(observation_space["observation"])
+        self.share_encoder = bool(share_encoder)
         if optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs and "foreach" not in self.optimizer_kwargs:
             # one fused kernel per step instead of one per parameter tensor (the heads are small)
             self.optimizer_kwargs = dict(self.optimizer_kwargs, fused=True)
         self._build(lr_schedule)
 
     # ------------------------------------------------------------------ construction
-    def _make_actor(self) -> GoalActor:
-        fe = self.make_features_extractor()
+    def _make_actor(self, fe: Optional[GoalPairExtractor] = None) -> GoalActor:
+        fe = fe if fe is not None else self.make_features_extractor()
         return GoalActor(self.observation_space, self.action_space, self.pi_arch, fe, fe.features_dim,
                          self.activation_fn).to(self.device)
 
-    def _make_critic(self, arch: Sequence[int], support: th.Tensor, n_members: int) -> CategoricalCritic:
-        fe = self.make_features_extractor()
+    def _make_critic(self, arch: Sequence[int], support: th.Tensor, n_members: int,
+                     fe: Optional[GoalPairExtractor] = None) -> CategoricalCritic:
+        fe = fe if fe is not None else self.make_features_extractor()
         return CategoricalCritic(self.observation_space, self.action_space, arch, fe, fe.features_dim, support,
                                  n_members, self.activation_fn).to(self.device)
 
     def _build(self, lr_schedule: Schedule) -> None:
         lr = lr_schedule(1)
-        self.actor = self._make_actor()
-        self.actor_target = self._make_actor()
+        enc = enc_t = None
+        if self.share_encoder:
+            enc = self.make_features_extractor().to(self.device)
+            enc_t = self.make_features_extractor().to(self.device)
+            enc_t.load_state_dict(enc.state_dict())
+            self.encoder, self.encoder_target = enc, enc_t
+        self.actor = self._make_actor(enc)
+        self.actor_target = self._make_actor(enc_t)
         self.actor_target.load_state_dict(self.actor.state_dict())
-        self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr, **self.optimizer_kwargs)
-
-        self.critic = self._make_critic(self.qf_arch, self._distance_support, self.n_critics)
-        self.critic_target = self._make_critic(self.qf_arch, self._distance_support, self.n_critics)
+        self.critic = self._make_critic(self.qf_arch, self._distance_support, self.n_critics, enc)
+        self.critic_target = self._make_critic(self.qf_arch, self._distance_support, self.n_critics, enc_t)
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr, **self.optimizer_kwargs)
-
-        self.cost_critic = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics)
-        self.cost_critic_target = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics)
+        self.cost_critic = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics, enc)
+        self.cost_critic_target = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics, enc_t)
         self.cost_critic_target.load_state_dict(self.cost_critic.state_dict())
-        self.cost_critic.optimizer = self.optimizer_class(self.cost_critic.parameters(), lr=lr, **self.optimizer_kwargs)
+
+        opt = lambda params: self.optimizer_class(list(params), lr=lr, **self.optimizer_kwargs)  # noqa: E731
+        if self.share_encoder:
+            # The encoder learns from the critic losses only; its parameters sit in the distance
+            # critic's optimizer, the actor's optimizer holds its head alone.
+            self.actor.optimizer = opt(self.actor.mu.parameters())
+            self.critic.optimizer = opt([*self.critic.head.parameters(), *enc.parameters()])
+            self.cost_critic.optimizer = opt(self.cost_critic.head.parameters())
+        else:
+            self.actor.optimizer = opt(self.actor.parameters())
+            self.critic.optimizer = opt(self.critic.parameters())
+            self.cost_critic.optimizer = opt(self.cost_critic.parameters())
 
         for target in (self.actor_target, self.critic_target, self.cost_critic_target):
             target.set_training_mode(False)
+
+    def target_parameter_pairs(self) -> Tuple[List[th.Tensor], List[th.Tensor]]:
+        """Parameters of the online networks and of their targets, aligned and each listed once
+        (a shared encoder appears once), for Polyak averaging."""
+        def unique(nets) -> List[th.Tensor]:
+            seen, out = set(), []
+            for net in nets:
+                for p in net.parameters():
+                    if id(p) not in seen:
+                        seen.add(id(p))
+                        out.append(p)
+            return out
+
+        online = unique((self.actor, self.critic, self.cost_critic))
+        target = unique((self.actor_target, self.critic_target, self.cost_critic_target))
+        if len(online) != len(target) or any(a.shape != b.shape for a, b in zip(online, target)):
+            raise RuntimeError("online and target networks are not aligned")
+        return online, target
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         data = super()._get_constructor_parameters()
@@ -398,7 +495,7 @@ class SafeGoalPolicy(BasePolicy):
             optimizer_class=self.optimizer_class, optimizer_kwargs=self.optimizer_kwargs,
             n_critics=self.n_critics, n_cost_critics=self.n_cost_critics,
             n_distance_bins=self.n_distance_bins, n_cost_bins=self.n_cost_bins, cost_max=self.cost_max,
-            lr_schedule=self._dummy_schedule,
+            share_encoder=self.share_encoder, lr_schedule=self._dummy_schedule,
         ))
         return data
 
@@ -410,9 +507,16 @@ class SafeGoalPolicy(BasePolicy):
         return self.actor(observation)
 
     def set_training_mode(self, mode: bool) -> None:
-        self.actor.set_training_mode(mode)
-        self.critic.set_training_mode(mode)
-        self.cost_critic.set_training_mode(mode)
+        # What ``actor/critic/cost_critic.set_training_mode`` do, with each module visited once
+        # (SB3 toggles the mode on every environment step; a shared encoder sits in six places).
+        mode = bool(mode)
+        if getattr(self, "_mode_modules", None) is None:
+            seen: Dict[int, nn.Module] = {}
+            for net in (self.actor, self.critic, self.cost_critic):
+                seen.update((id(m), m) for m in net.modules())
+            self._mode_modules = list(seen.values())
+        for m in self._mode_modules:
+            object.__setattr__(m, "training", mode)  # a plain flag: skip nn.Module's slow __setattr__
         self.training = mode
 
     # ------------------------------------------------------------------ distances and costs
@@ -435,10 +539,14 @@ class SafeGoalPolicy(BasePolicy):
 
     def _pair_values(self, obs: th.Tensor, goals: th.Tensor, quantities: Sequence[str]) -> Dict[str, th.Tensor]:
         """Per-member values for aligned ``(obs[i], goals[i])`` pairs, as ``(E, B)`` tensors."""
+        cache: Dict[int, th.Tensor] = {}  # a shared encoder encodes once
+
         def feats(net) -> th.Tensor:
             fe = net.features_extractor
-            codes = fe.encode(th.cat([obs, goals], 0))
-            return th.cat(codes.split([obs.shape[0], goals.shape[0]]), 1)
+            if id(fe) not in cache:
+                codes = fe.encode(th.cat([obs, goals], 0))
+                cache[id(fe)] = th.cat(codes.split([obs.shape[0], goals.shape[0]]), 1)
+            return cache[id(fe)]
 
         actions = self.actor.action_from_features(feats(self.actor))
         out = {}
@@ -502,8 +610,15 @@ class SafeGoalPolicy(BasePolicy):
         b, _ = self._as_batch(obs_b, "obs_b")
         n, m = a.shape[0], b.shape[0]
         critics = {q: (self.critic if q == "distance" else self.cost_critic) for q in quantities}
-        actor_parts = _first_layer_products(self.actor.features_extractor, self.actor.mu, a, b)
-        critic_parts = {q: _first_layer_products(c.features_extractor, c.head, a, b) for q, c in critics.items()}
+        codes: Dict[int, Tuple[th.Tensor, th.Tensor]] = {}  # a shared encoder encodes once
+
+        def encoded(fe: GoalPairExtractor) -> Tuple[th.Tensor, th.Tensor]:
+            if id(fe) not in codes:
+                codes[id(fe)] = (_encode_chunked(fe, a), _encode_chunked(fe, b))
+            return codes[id(fe)]
+
+        actor_parts = _first_layer_products(encoded(self.actor.features_extractor), self.actor.mu)
+        critic_parts = {q: _first_layer_products(encoded(c.features_extractor), c.head) for q, c in critics.items()}
         out = {q: np.empty((n, m) if aggregate != "none" else (c.n_members, n, m), dtype=np.float32)
                for q, c in critics.items()}
         if n == 0 or m == 0:
@@ -526,10 +641,17 @@ class SafeGoalPolicy(BasePolicy):
         return out
 
 
-def _first_layer_products(fe: GoalPairExtractor, head: EnsembleHead, a: th.Tensor, b: th.Tensor):
-    """First-layer pre-activations of ``a`` as observations ``(E, N, H)`` and ``b`` as goals
-    ``(E, M, H)`` (bias included), plus the action block of the weight (``None`` for the actor)."""
-    code_a, code_b = fe.encode(a), fe.encode(b)
+def _encode_chunked(fe: GoalPairExtractor, x: th.Tensor, chunk: int = 1024) -> th.Tensor:
+    """Codes of ``x`` in blocks of ``chunk`` observations (bounded memory for image batches)."""
+    if x.shape[0] <= chunk:
+        return fe.encode(x)
+    return th.cat([fe.encode(x[i:i + chunk]) for i in range(0, x.shape[0], chunk)], 0)
+
+
+def _first_layer_products(codes: Tuple[th.Tensor, th.Tensor], head: EnsembleHead):
+    """First-layer pre-activations of the codes ``a`` as observations ``(E, N, H)`` and ``b`` as
+    goals ``(E, M, H)`` (bias included), plus the action block of the weight (``None`` for the actor)."""
+    code_a, code_b = codes
     d = code_a.shape[1]
     in_dim = head.layers[0].weight.shape[1]
     sizes = [d, d] + ([in_dim - 2 * d] if in_dim > 2 * d else [])

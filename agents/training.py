@@ -86,6 +86,10 @@ class TrainConfig:
     """hidden widths of actor and critic heads"""
     encoder_arch: List[int] = field(default_factory=lambda: [64, 64])
     """hidden widths of the MLP observation encoder"""
+    share_encoder: Optional[bool] = None
+    """one encoder for actor and critics, trained by the critic losses (default: for images)"""
+    augmentation: Optional[str] = None
+    """image augmentation of the shared encoder: None or 'shift' (DrQ's random shift)"""
     distance_bins: Optional[int] = None
     """bins of the distance distribution (default: the episode step limit)"""
     cost_bins: int = 40
@@ -102,14 +106,23 @@ class TrainConfig:
     """environment steps between evaluations (and checkpoints)"""
     eval_problems: int = 200
     """evaluation: episodes on pairs within eval_max_distance"""
-    eval_max_distance: float = 10.0
-    """evaluation: largest geodesic distance of the episodes' pairs"""
+    eval_max_distance: Optional[float] = None
+    """evaluation: largest geodesic distance of the episodes' pairs (default: 3 m on the
+    apartments, 10 units on the 2D maps)"""
     eval_pairs: int = 500
     """evaluation: pairs for the distance rank correlation"""
+    eval_pair_max_distance: Optional[float] = None
+    """evaluation: largest geodesic distance of those pairs (default: 4 m on the apartments,
+    15 units on the 2D maps)"""
     eval_seed: int = 12345
     """evaluation: seed of the held-out problems"""
     threads: int = 1
     """torch threads"""
+    resume: bool = False
+    """continue the run in out_dir from its last checkpoint (model, replay buffer, evaluations)"""
+    replay_save_freq: Optional[int] = None
+    """environment steps between saves of the replay buffer for resuming (default: eval_freq;
+    0: never)"""
     progress_bar: bool = True
     """show a progress bar"""
     tensorboard_log: Optional[str] = None
@@ -132,8 +145,26 @@ class TrainConfig:
         if self.init and not os.path.exists(self.init):
             raise FileNotFoundError(f"init checkpoint {self.init!r} does not exist")
 
+    def eval_distances(self) -> Tuple[float, float]:
+        """``(eval_max_distance, eval_pair_max_distance)`` with the env-dependent defaults."""
+        lo, hi = default_eval_distances(self.env_id)
+        return (self.eval_max_distance if self.eval_max_distance is not None else lo,
+                self.eval_pair_max_distance if self.eval_pair_max_distance is not None else hi)
+
     def resolved_out_dir(self) -> str:
         return self.out_dir or os.path.join("runs", f"{self.env_id.split(':')[-1]}-{self.stage}-s{self.seed}")
+
+
+def default_eval_distances(env_id: str) -> Tuple[float, float]:
+    """Geodesic bands of the held-out figures: success on pairs within the first, distance rank
+    correlation on pairs within the second (3 / 4 m on the apartments, 10 / 15 units on the 2D maps)."""
+    from safe_mapf_envs.registration import env_spec
+
+    try:
+        layout = env_spec(env_id).layout
+    except KeyError:
+        return 10.0, 15.0
+    return (3.0, 4.0) if layout.startswith("Apartment") else (10.0, 15.0)
 
 
 def _sampler_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
@@ -179,17 +210,20 @@ def build_model(cfg: TrainConfig):
         model.replay_buffer.seed(cfg.seed)
         model.set_problem_sampler(cfg.sampler, **sampler_kwargs)
     else:
+        image = len(env.observation_space["observation"].shape) >= 3
         bins = cfg.distance_bins or (env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 20)
         model = SafeGoalTD3(
             "MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
             learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, action_noise=noise,
-            replay_buffer_kwargs=dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio),
+            replay_buffer_kwargs=dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio,
+                                      achieved_goal_is_observation=image),
             actor_learning_rate=cfg.actor_learning_rate,
             problem_sampler=cfg.sampler, problem_sampler_kwargs=sampler_kwargs, env_id=cfg.env_id.split(":")[-1],
             policy_kwargs=dict(net_arch=list(cfg.net_arch), n_critics=cfg.n_critics,
                                n_cost_critics=cfg.n_cost_critics, n_distance_bins=int(bins),
-                               n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max,
+                               n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max, share_encoder=cfg.share_encoder,
                                features_extractor_kwargs={"net_arch": list(cfg.encoder_arch)}),
+            augmentation=cfg.augmentation,
             tensorboard_log=cfg.tensorboard_log, verbose=cfg.verbose, seed=cfg.seed, device="cpu",
         )
     from .lagrangian import LagrangeMultiplier
@@ -211,33 +245,122 @@ def _versions() -> Dict[str, str]:
             "numpy": np.__version__, "machine": platform.machine(), "cpus": str(os.cpu_count())}
 
 
-def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[str, Any]:
-    """Run one stage and write its files (see the module docstring); return the summary."""
-    import torch
+class ResumeCheckpoint:
+    """Everything a run needs to continue after an interruption, in ``<out_dir>/resume/``:
+    ``model.zip`` (networks, optimisers, multiplier, step counter), ``replay.npz`` (the replay
+    buffer's filled part) and ``state.json`` (wall and CPU time so far). Written every ``freq``
+    environment steps, each file replaced atomically."""
+
+    def __init__(self, out_dir: str) -> None:
+        self.dir = os.path.join(out_dir, "resume")
+
+    def exists(self) -> bool:
+        return os.path.exists(os.path.join(self.dir, "model.zip"))
+
+    def save(self, model: Any, wall_s: float, cpu_s: float, replay: bool = True) -> None:
+        os.makedirs(self.dir, exist_ok=True)
+        tmp = os.path.join(self.dir, "model.tmp.zip")
+        model.save(tmp)
+        if replay:
+            model.replay_buffer.save_arrays(os.path.join(self.dir, "replay.npz"))
+        os.replace(tmp, os.path.join(self.dir, "model.zip"))
+        state = {"timesteps": int(model.num_timesteps), "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
+                 "replay": bool(replay)}
+        with open(os.path.join(self.dir, "state.json.tmp"), "w") as f:
+            json.dump(state, f)
+        os.replace(os.path.join(self.dir, "state.json.tmp"), os.path.join(self.dir, "state.json"))
+
+    def load(self, cfg: "TrainConfig"):
+        """The saved model (with its replay buffer) set up for ``cfg``, and the saved state."""
+        import gymnasium as gym
+
+        import safe_mapf_envs  # noqa: F401
+
+        from .algorithm import SafeGoalTD3
+
+        with open(os.path.join(self.dir, "state.json")) as f:
+            state = json.load(f)
+        model = SafeGoalTD3.load(os.path.join(self.dir, "model.zip"), env=gym.make(cfg.env_id), device="cpu")
+        replay = os.path.join(self.dir, "replay.npz")
+        if state.get("replay") and os.path.exists(replay):
+            model.replay_buffer.load_arrays(replay)
+        return model, state
+
+
+def _make_callbacks(cfg: "TrainConfig", out: str, eval_log: str, resume: ResumeCheckpoint,
+                    clock: Dict[str, float]):
+    from stable_baselines3.common.callbacks import BaseCallback
 
     from .evaluation import PeriodicEvaluation
+
+    max_d, pair_d = cfg.eval_distances()
+    evaluation = PeriodicEvaluation(
+        cfg.env_id, eval_freq=cfg.eval_freq, save_path=os.path.join(out, "checkpoint.zip"), log_path=eval_log,
+        eval_kwargs=dict(n_problems=cfg.eval_problems, max_distance=max_d, n_pairs=cfg.eval_pairs,
+                         pair_max_distance=pair_d, seed=cfg.eval_seed), verbose=1)
+    freq = cfg.eval_freq if cfg.replay_save_freq is None else int(cfg.replay_save_freq)
+
+    class _Resume(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self._last = 0
+
+        def _on_training_start(self) -> None:
+            self._last = self.num_timesteps
+
+        def _on_step(self) -> bool:
+            if freq > 0 and self.num_timesteps - self._last >= freq:
+                self._last = self.num_timesteps
+                resume.save(self.model, clock["wall0"] + time.time() - clock["t0"],
+                            clock["cpu0"] + time.process_time() - clock["c0"])
+            return True
+
+    return evaluation, [evaluation, _Resume()]
+
+
+def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[str, Any]:
+    """Run one stage and write its files (see the module docstring); return the summary.
+
+    With ``cfg.resume`` the run continues from ``<out_dir>/resume/`` (written every
+    ``replay_save_freq`` steps) up to ``cfg.timesteps`` steps in all; the evaluation log is
+    kept and the summary's wall and CPU times cover every part of the run.
+    """
+    import torch
 
     cfg.validate()
     torch.set_num_threads(cfg.threads)
     out = cfg.resolved_out_dir()
     os.makedirs(out, exist_ok=True)
+    resume = ResumeCheckpoint(out)
+    if cfg.resume and not resume.exists():
+        raise FileNotFoundError(f"nothing to resume in {out!r}: no resume/model.zip (a run writes it every "
+                                f"replay_save_freq steps)")
     config = {"config": dataclasses.asdict(cfg), "command": command if command is not None else sys.argv,
               "versions": _versions()}
-    with open(os.path.join(out, "config.json"), "w") as f:
+    with open(os.path.join(out, "config.json" if not cfg.resume else "config.resume.json"), "w") as f:
         json.dump(config, f, indent=2)
     eval_log = os.path.join(out, "evaluations.jsonl")
-    if os.path.exists(eval_log):
-        os.remove(eval_log)
 
-    t0, c0 = time.time(), time.process_time()
-    model = build_model(cfg)
-    evaluation = PeriodicEvaluation(
-        cfg.env_id, eval_freq=cfg.eval_freq, save_path=os.path.join(out, "checkpoint.zip"), log_path=eval_log,
-        eval_kwargs=dict(n_problems=cfg.eval_problems, max_distance=cfg.eval_max_distance,
-                         n_pairs=cfg.eval_pairs, seed=cfg.eval_seed), verbose=1)
-    model.learn(cfg.timesteps, callback=evaluation, progress_bar=cfg.progress_bar,
-                tb_log_name=f"{cfg.stage}-s{cfg.seed}")
-    train_wall, train_cpu = time.time() - t0, time.process_time() - c0
+    clock = {"t0": time.time(), "c0": time.process_time(), "wall0": 0.0, "cpu0": 0.0}
+    if cfg.resume:
+        model, state = resume.load(cfg)
+        clock["wall0"], clock["cpu0"] = float(state["wall_s"]), float(state["cpu_s"])
+        if os.path.exists(eval_log):  # drop evaluations made after the resume point
+            with open(eval_log) as f:
+                kept = [line for line in f if line.strip() and json.loads(line)["timesteps"] <= model.num_timesteps]
+            with open(eval_log, "w") as f:
+                f.writelines(kept)
+    else:
+        if os.path.exists(eval_log):
+            os.remove(eval_log)
+        model = build_model(cfg)
+    evaluation, callbacks = _make_callbacks(cfg, out, eval_log, resume, clock)
+    remaining = cfg.timesteps - int(model.num_timesteps) if cfg.resume else cfg.timesteps
+    if remaining > 0:
+        model.learn(remaining, callback=callbacks, progress_bar=cfg.progress_bar,
+                    tb_log_name=f"{cfg.stage}-s{cfg.seed}", reset_num_timesteps=not cfg.resume)
+    train_wall = clock["wall0"] + time.time() - clock["t0"]
+    train_cpu = clock["cpu0"] + time.process_time() - clock["c0"]
     if evaluation.history and evaluation.history[-1]["timesteps"] == model.num_timesteps:
         final = evaluation.history[-1]
     else:
@@ -254,4 +377,4 @@ def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[s
     return summary
 
 
-__all__ = ["STAGES", "TrainConfig", "build_model", "train_stage"]
+__all__ = ["STAGES", "ResumeCheckpoint", "TrainConfig", "build_model", "default_eval_distances", "train_stage"]

@@ -55,6 +55,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--n-cost-critics", type=int, default=d.n_cost_critics)
     g.add_argument("--net-arch", type=int, nargs="+", default=d.net_arch, help="hidden widths of the heads")
     g.add_argument("--encoder-arch", type=int, nargs="+", default=d.encoder_arch, help="MLP encoder widths")
+    g.add_argument("--share-encoder", dest="share_encoder", action="store_true", default=None,
+                   help="one encoder for actor and critics, trained by the critic losses (default for images)")
+    g.add_argument("--separate-encoders", dest="share_encoder", action="store_false",
+                   help="an encoder per network (default for vectors)")
+    g.add_argument("--augmentation", choices=["shift"], default=None,
+                   help="image augmentation of the shared encoder (DrQ's random shift)")
     g.add_argument("--distance-bins", type=int, default=None, help="default: the episode step limit")
     g.add_argument("--cost-bins", type=int, default=d.cost_bins)
     g.add_argument("--cost-max", type=float, default=d.cost_max)
@@ -64,10 +70,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("evaluation and output")
     g.add_argument("--eval-freq", type=int, default=d.eval_freq, help="steps between evaluations and checkpoints")
     g.add_argument("--eval-problems", type=int, default=d.eval_problems)
-    g.add_argument("--eval-max-distance", type=float, default=d.eval_max_distance)
+    g.add_argument("--eval-max-distance", type=float, default=None,
+                   help="geodesic limit of the success pairs (default: 3 m on the apartments, 10 on the 2D maps)")
     g.add_argument("--eval-pairs", type=int, default=d.eval_pairs)
+    g.add_argument("--eval-pair-max-distance", type=float, default=None,
+                   help="geodesic limit of the correlation pairs (default: 4 m on the apartments, 15 on the 2D maps)")
     g.add_argument("--eval-seed", type=int, default=d.eval_seed)
     g.add_argument("--threads", type=int, default=d.threads, help="torch threads")
+    g.add_argument("--resume", action="store_true",
+                   help="continue the run in --out from its last resume point, up to --timesteps steps in all")
+    g.add_argument("--replay-save-freq", type=int, default=None,
+                   help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
     g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
     g.add_argument("--tensorboard", dest="tensorboard_log", default=None, help="TensorBoard folder")
     g.add_argument("--verbose", type=int, default=d.verbose)
