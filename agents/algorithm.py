@@ -108,14 +108,12 @@ class RandomShift:
             return x
         b, h, w = x.shape[0], x.shape[-3], x.shape[-2]
         p = self.pad
-        flat = x.reshape(b, -1, h, w, x.shape[-1])
-        rows = th.arange(h).unsqueeze(0) + th.randint(0, 2 * p + 1, (b, 1), generator=self.generator)
-        cols = th.arange(w).unsqueeze(0) + th.randint(0, 2 * p + 1, (b, 1), generator=self.generator)
-        rows, cols = (rows - p).clamp_(0, h - 1), (cols - p).clamp_(0, w - 1)  # edge padding
-        bi = th.arange(b).view(b, 1, 1, 1)
-        vi = th.arange(flat.shape[1]).view(1, -1, 1, 1)
-        out = flat[bi, vi, rows.view(b, 1, h, 1), cols.view(b, 1, 1, w)]
-        return out.reshape(x.shape)
+        rows = (th.arange(h + 2 * p) - p).clamp_(0, h - 1)  # edge padding by index
+        cols = (th.arange(w + 2 * p) - p).clamp_(0, w - 1)
+        padded = x.index_select(-3, rows).index_select(-2, cols)
+        dy = th.randint(0, 2 * p + 1, (b,), generator=self.generator).tolist()
+        dx = th.randint(0, 2 * p + 1, (b,), generator=self.generator).tolist()
+        return th.stack([padded[i, ..., dy[i]:dy[i] + h, dx[i]:dx[i] + w, :] for i in range(b)])
 
 
 class SafeGoalTD3(OffPolicyAlgorithm):

@@ -535,7 +535,7 @@ class SafeGoalPolicy(BasePolicy):
             arr = arr.astype(np.float32, copy=False)
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{what} contains NaN or inf")
-        return th.as_tensor(arr, device=self.device), single
+        return th.as_tensor(np.ascontiguousarray(arr), device=self.device), single
 
     def _pair_values(self, obs: th.Tensor, goals: th.Tensor, quantities: Sequence[str]) -> Dict[str, th.Tensor]:
         """Per-member values for aligned ``(obs[i], goals[i])`` pairs, as ``(E, B)`` tensors."""

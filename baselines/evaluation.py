@@ -73,6 +73,7 @@ class EvaluationSetup:
     proximity_radius: float = 1.5
     suboptimality: float = 1.1
     cbs_time_limit: float = 5.0
+    min_separation: float = 2.5
     shortest: np.ndarray = field(init=False, repr=False)
     planner: BufferPlanner = field(init=False, repr=False)
 
@@ -106,6 +107,14 @@ class EvaluationSetup:
         states = env.unwrapped.sample_states(n_nodes, rng)
         obs = observations_at(env, states)
         env.close()
+        if "min_separation" not in kwargs:
+            # a quarter more than the multi-agent env's own spacing of starts (2.5 units on the
+            # 2D maps, 1.125 m on the apartments)
+            import safe_mapf_envs
+
+            penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
+            kwargs["min_separation"] = 1.25 * penv.min_separation
+            penv.close()
         D, C = models["unconstrained"].pairwise(obs, obs, aggregate="max")
         return cls(env_id, models, states, obs, np.asarray(D, np.float64), np.asarray(C, np.float64), **kwargs)
 
@@ -122,12 +131,15 @@ class EvaluationSetup:
 
 
 def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_problems: int, seed: int = 0,
-                  tolerance: float = 0.2, min_separation: float = 2.5) -> List[Problem]:
+                  tolerance: float = 0.2, min_separation: Optional[float] = None) -> List[Problem]:
     """``n_problems`` problems of ``n_agents`` agents at a difficulty, reproducible from ``seed``.
 
-    Starts are at least ``min_separation`` units apart and not near each other under the
-    planner's proximity radius (goals likewise), so every agent can be placed and parked.
+    Starts are at least ``min_separation`` world units apart (default: the setup's) and not
+    near each other under the planner's proximity radius (goals likewise), so every agent can
+    be placed and parked.
     """
+    if min_separation is None:
+        min_separation = setup.min_separation
     if n_agents < 1 or n_problems < 1:
         raise ValueError(f"need n_agents >= 1 and n_problems >= 1, got {n_agents}, {n_problems}")
     target = setup.target(difficulty)

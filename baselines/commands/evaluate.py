@@ -14,6 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="compare the methods on the same problems (Table I, Figure 1)",
                        description=run.__doc__)
     p.add_argument("--env", default="SafeCentralObstacle-v0", help="env id with shipped checkpoints")
+    p.add_argument("--unconstrained", default=None, metavar="PATH",
+                   help="unconstrained checkpoint (default: the shipped one for --env)")
+    p.add_argument("--constrained", default=None, metavar="PATH",
+                   help="constrained checkpoint (default: the shipped one for --env)")
     p.add_argument("--agents", type=int, nargs="+", default=[1, 5, 10, 20], metavar="N", help="agent counts")
     p.add_argument("--problems", type=int, default=50, metavar="P", help="problems per difficulty (default 50)")
     p.add_argument("--difficulty", nargs="+", choices=list(DIFFICULTIES), default=list(DIFFICULTIES))
@@ -36,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run each method on the same problems (difficulties easy / medium / hard target the
     largest finite shortest-path distance on the buffer graph divided by 8 / 4 / 2), then write
-    per-run rows (runs.csv), the aggregate (table.csv), a Markdown table laid out like the
+    per-run rows (runs.csv), the aggregate (table.csv, table.json), a Markdown table laid out like the
     paper's Table I (table.md, printed) and the trajectory figure (figure.png)."""
     from pathlib import Path
 
@@ -56,13 +60,18 @@ def run(args: argparse.Namespace) -> int:
     if args.budget is not None:
         methods = [m.with_options(budget=args.budget) if m.budget is not None else m for m in methods]
     t0 = time.perf_counter()
-    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed)
+    from agents import load_pretrained
+
+    models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
+              for k in ("unconstrained", "constrained")}
+    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
     rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                     max_cycles=args.max_cycles, progress=not args.no_progress and not args.json)
     agg = aggregate(rows)
     out = Path(args.out)
     write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
+    (out / "table.json").write_text(json.dumps(agg, indent=1))
     names = [m.name for m in methods]
     table = markdown_table(agg, names)
     wall = time.perf_counter() - t0
@@ -78,6 +87,6 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(agg))
     else:
         print(header + table)
-        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.md'}"
+        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}"
               + (f", {out / 'figure.png'}" if args.figure else ""))
     return 0

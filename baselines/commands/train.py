@@ -47,7 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--lagrange-update-episodes", type=int, default=d.lagrange_update_episodes)
     g = p.add_argument_group("learning")
     g.add_argument("--batch-size", type=int, default=d.batch_size)
-    g.add_argument("--learning-rate", type=float, default=d.learning_rate, help="critic learning rate")
+    g.add_argument("--learning-rate", type=float, default=None,
+                   help="critic learning rate (default: 3e-4 for vectors, 1e-3 for panoramas)")
     g.add_argument("--actor-learning-rate", type=float, default=None, help="default: --learning-rate")
     g.add_argument("--buffer-size", type=int, default=d.buffer_size)
     g.add_argument("--learning-starts", type=int, default=d.learning_starts)

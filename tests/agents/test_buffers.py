@@ -2,6 +2,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 
 import safe_mapf_envs  # noqa: F401
 from agents.buffers import GoalCostReplayBuffer
@@ -119,3 +120,38 @@ def test_rejects_non_goal_spaces():
     space = gym.spaces.Box(0, 1, (2,))
     with pytest.raises(ValueError, match="Dict"):
         GoalCostReplayBuffer(10, space, space)
+
+
+def test_buffer_arrays_round_trip_and_shared_achieved_goal(tmp_path):
+    env = gym.make("SafeApartment0-v0")
+    space = env.observation_space
+    buf = GoalCostReplayBuffer(50, space, env.action_space, device="cpu",
+                               compute_terminated=env.unwrapped.compute_terminated,
+                               achieved_goal_is_observation=True, seed=0)
+    assert buf.observations["achieved_goal"] is buf.observations["observation"]
+    obs, info = env.reset(seed=0)
+    for t in range(30):
+        nxt, _, term, trunc, info2 = env.step(env.action_space.sample())
+        done = term or trunc or t % 10 == 9
+        buf.add({k: v[None] for k, v in obs.items()}, {k: v[None] for k, v in nxt.items()},
+                np.zeros((1, 2), np.float32), np.array([-1.0]), np.array([done]), [info2])
+        obs = env.reset()[0] if done else nxt
+    path = str(tmp_path / "replay.npz")
+    buf.save_arrays(path)
+    other = GoalCostReplayBuffer(50, space, env.action_space, device="cpu",
+                                 compute_terminated=env.unwrapped.compute_terminated,
+                                 achieved_goal_is_observation=True, seed=0)
+    other.load_arrays(path)
+    assert other.pos == buf.pos and other.n_complete_transitions() == buf.n_complete_transitions() == 30
+    np.testing.assert_array_equal(other.observations["observation"][:30], buf.observations["observation"][:30])
+    np.testing.assert_array_equal(other.costs[:30], buf.costs[:30])
+    np.testing.assert_array_equal(other.positions[:30], buf.positions[:30])
+    b1, b2 = buf.sample(8), other.sample(8)
+    assert th.equal(b1.observations["observation"], b2.observations["observation"])
+    small = GoalCostReplayBuffer(40, space, env.action_space, device="cpu",
+                                 compute_terminated=env.unwrapped.compute_terminated)
+    with pytest.raises(ValueError, match="holds a buffer of 50"):
+        small.load_arrays(path)
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a readable replay-buffer file"):
+        other.load_arrays(str(tmp_path / "bad.npz"))

@@ -44,3 +44,28 @@ def test_constrained_stage_needs_init(tmp_path, capsys):
 def test_missing_init_checkpoint(tmp_path, capsys):
     assert main(["train", "--stage", "constrained", "--init", str(tmp_path / "nope.zip"), *TINY]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_resume_continues_a_run_from_its_last_resume_point(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["train", "--out", str(out), "--replay-save-freq", "150", *TINY]) == 0
+    full = json.loads((out / "summary.json").read_text())
+    state = json.loads((out / "resume" / "state.json").read_text())
+    assert state["timesteps"] == 300 and state["replay"]
+    saved = SafeGoalTD3.load(out / "resume" / "model.zip")
+    assert saved.num_timesteps == 300
+    # continue the same run to 450 steps in all: counters, buffer and evaluation log carry over
+    args = [a if a != "300" else "450" for a in TINY]
+    assert main(["train", "--out", str(out), "--resume", *args]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["timesteps"] == 450 and summary["wall_s"] > full["wall_s"]
+    evals = [json.loads(line)["timesteps"] for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    assert evals == [150, 300, 450]
+    model = SafeGoalTD3.load(out / "model.zip")
+    assert model.num_timesteps == 450 and model._n_updates > saved._n_updates
+    assert (out / "config.resume.json").exists()
+
+
+def test_resume_without_a_resume_point_says_so(tmp_path, capsys):
+    assert main(["train", "--out", str(tmp_path / "empty"), "--resume", *TINY]) == 2
+    assert "nothing to resume" in capsys.readouterr().err
