@@ -153,6 +153,9 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             observations (pad each view by ``shift_pad`` pixels, crop back at a random offset)
             for the shared-encoder layout; ignored for vector observations.
         shift_pad: the largest shift of ``"shift"``, in pixels.
+        actor_preactivation_penalty: weight of ``mean(u ** 2)`` in the actor loss, ``u`` the action
+            before ``tanh``: keeps the actor out of ``tanh``'s flat ends, where its gradient
+            vanishes and it stops learning (0: off).
         stats_window_size, tensorboard_log, policy_kwargs, verbose, seed, device: as in SB3.
 
     The discount is fixed to 1 (distances count steps); the episode's time limit keeps
@@ -195,6 +198,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         env_id: Optional[str] = None,
         augmentation: Optional[str] = None,
         shift_pad: int = 2,
+        actor_preactivation_penalty: float = 0.0,
         stats_window_size: int = 100,
         tensorboard_log: Optional[str] = None,
         policy_kwargs: Optional[Dict[str, Any]] = None,
@@ -233,6 +237,9 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         self.env_id = env_id
         self.augmentation = augmentation
         self.shift_pad = int(shift_pad)
+        if not (np.isfinite(actor_preactivation_penalty) and actor_preactivation_penalty >= 0):
+            raise ValueError(f"actor_preactivation_penalty must be >= 0, got {actor_preactivation_penalty!r}")
+        self.actor_preactivation_penalty = float(actor_preactivation_penalty)
         self.actor_learning_rate = actor_learning_rate
         self.cost_learning_rate = cost_learning_rate
         self.policy_delay = int(policy_delay)
@@ -425,7 +432,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
     def _actor_step(self, f_actor: th.Tensor, f_d: th.Tensor, f_c: th.Tensor, lam: float) -> Tuple[float, float]:
         """One actor update: minimise the predicted distance (plus ``lam`` times the cost)
         of its action, with the critics' features ``f_d``/``f_c`` held fixed."""
-        actions = self.actor.action_from_features(f_actor)
+        pre = self.actor.preactivation(f_actor)
+        actions = th.tanh(pre)
         dist = aggregate_ensemble(self.critic.expected(self.critic.logits_from_features(f_d, actions)),
                                   self.actor_aggregate)
         if lam > 0:
@@ -434,6 +442,9 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
         else:
             a_loss = dist.mean()
+        penalty = getattr(self, "actor_preactivation_penalty", 0.0)
+        if penalty > 0:
+            a_loss = a_loss + penalty * pre.square().mean()
         self.actor.optimizer.zero_grad()
         a_loss.backward()
         self.actor.optimizer.step()

@@ -248,30 +248,53 @@ class EnsembleHead(nn.Module):
 
 # --------------------------------------------------------------------------- actor / critics
 class GoalActor(BasePolicy):
-    """Deterministic goal-conditioned actor ``pi(obs, goal) -> action in [-1, 1]^A``."""
+    """Deterministic goal-conditioned actor ``pi(obs, goal) -> action in [-1, 1]^A``.
+
+    ``input_norm`` puts a LayerNorm on the features before the MLP (after the actor trunk of
+    DrQ-v2): features of a shared image encoder, trained by the critics alone, grow in scale,
+    and an actor fed them directly drives ``tanh`` into saturation, where it stops learning.
+    The observation's and the goal's codes (the two halves of the features) are normalised
+    separately by one LayerNorm, so the first layer stays linear in each code and the
+    planner's pairwise matrices keep their one-encoding-per-node shortcut.
+    """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, net_arch: Sequence[int],
                  features_extractor: GoalPairExtractor, features_dim: int,
-                 activation_fn: Type[nn.Module] = nn.ReLU, normalize_images: bool = False) -> None:
+                 activation_fn: Type[nn.Module] = nn.ReLU, normalize_images: bool = False,
+                 input_norm: bool = False) -> None:
         super().__init__(observation_space, action_space, features_extractor=features_extractor,
                          normalize_images=normalize_images, squash_output=True)
         self.net_arch = list(net_arch)
         self.features_dim = features_dim
         self.activation_fn = activation_fn
         self.action_dim = int(np.prod(action_space.shape))
+        self.input_norm = bool(input_norm)
+        if self.input_norm and features_dim % 2:
+            raise ValueError(f"input_norm needs features made of two codes of equal size, got {features_dim}")
+        self.norm = nn.LayerNorm(features_dim // 2) if self.input_norm else nn.Identity()
         self.mu = EnsembleHead(1, features_dim, net_arch, self.action_dim, activation_fn)
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         data = super()._get_constructor_parameters()
         data.update(dict(net_arch=self.net_arch, features_dim=self.features_dim, activation_fn=self.activation_fn,
-                         features_extractor=self.features_extractor))
+                         features_extractor=self.features_extractor, input_norm=self.input_norm))
         return data
 
     def extract_features(self, obs: PyTorchObs, features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
         return (features_extractor or self.features_extractor)(obs)
 
+    def normalize_features(self, features: th.Tensor) -> th.Tensor:
+        """The MLP's input: ``[norm(code(obs)), norm(code(goal))]`` (identity without ``input_norm``)."""
+        if not self.input_norm:
+            return features
+        return self.norm(features.unflatten(-1, (2, -1))).flatten(-2)
+
+    def preactivation(self, features: th.Tensor) -> th.Tensor:
+        """The action before ``tanh``."""
+        return self.mu(self.normalize_features(features))[0]
+
     def action_from_features(self, features: th.Tensor) -> th.Tensor:
-        return th.tanh(self.mu(features)[0])
+        return th.tanh(self.preactivation(features))
 
     def forward(self, obs: PyTorchObs) -> th.Tensor:
         return self.action_from_features(self.extract_features(obs))
@@ -348,6 +371,8 @@ class SafeGoalPolicy(BasePolicy):
             largest representable distance, use the episode step limit.
         n_cost_bins: atoms of the cost distribution.
         cost_max: the largest atom of the cost distribution (the smallest is 0).
+        actor_input_norm: a LayerNorm on the actor's input features (default: with a shared
+            encoder; see :class:`GoalActor`).
         share_encoder: one observation encoder for actor and critics (the recipe of pixel-based
             off-policy RL: SAC-AE, DrQ), trained by the critic losses only, the actor reading
             its features detached, and one Polyak copy of it under every target network. With
@@ -384,6 +409,7 @@ class SafeGoalPolicy(BasePolicy):
         n_cost_bins: int = 40,
         cost_max: float = 40.0,
         share_encoder: Optional[bool] = None,
+        actor_input_norm: Optional[bool] = None,
     ) -> None:
         check_goal_space(observation_space)
         if not isinstance(action_space, spaces.Box):
@@ -418,6 +444,7 @@ class SafeGoalPolicy(BasePolicy):
         if share_encoder is None:
             share_encoder = _is_image_space(observation_space["observation"])
         self.share_encoder = bool(share_encoder)
+        self.actor_input_norm = self.share_encoder if actor_input_norm is None else bool(actor_input_norm)
         if optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs and "foreach" not in self.optimizer_kwargs:
             # one fused kernel per step instead of one per parameter tensor (the heads are small)
             self.optimizer_kwargs = dict(self.optimizer_kwargs, fused=True)
@@ -427,7 +454,7 @@ class SafeGoalPolicy(BasePolicy):
     def _make_actor(self, fe: Optional[GoalPairExtractor] = None) -> GoalActor:
         fe = fe if fe is not None else self.make_features_extractor()
         return GoalActor(self.observation_space, self.action_space, self.pi_arch, fe, fe.features_dim,
-                         self.activation_fn).to(self.device)
+                         self.activation_fn, input_norm=self.actor_input_norm).to(self.device)
 
     def _make_critic(self, arch: Sequence[int], support: th.Tensor, n_members: int,
                      fe: Optional[GoalPairExtractor] = None) -> CategoricalCritic:
@@ -457,7 +484,7 @@ class SafeGoalPolicy(BasePolicy):
         if self.share_encoder:
             # The encoder learns from the critic losses only; its parameters sit in the distance
             # critic's optimizer, the actor's optimizer holds its head alone.
-            self.actor.optimizer = opt(self.actor.mu.parameters())
+            self.actor.optimizer = opt([*self.actor.norm.parameters(), *self.actor.mu.parameters()])
             self.critic.optimizer = opt([*self.critic.head.parameters(), *enc.parameters()])
             self.cost_critic.optimizer = opt(self.cost_critic.head.parameters())
         else:
@@ -495,7 +522,8 @@ class SafeGoalPolicy(BasePolicy):
             optimizer_class=self.optimizer_class, optimizer_kwargs=self.optimizer_kwargs,
             n_critics=self.n_critics, n_cost_critics=self.n_cost_critics,
             n_distance_bins=self.n_distance_bins, n_cost_bins=self.n_cost_bins, cost_max=self.cost_max,
-            share_encoder=self.share_encoder, lr_schedule=self._dummy_schedule,
+            share_encoder=self.share_encoder, actor_input_norm=self.actor_input_norm,
+            lr_schedule=self._dummy_schedule,
         ))
         return data
 
@@ -617,7 +645,8 @@ class SafeGoalPolicy(BasePolicy):
                 codes[id(fe)] = (_encode_chunked(fe, a), _encode_chunked(fe, b))
             return codes[id(fe)]
 
-        actor_parts = _first_layer_products(encoded(self.actor.features_extractor), self.actor.mu)
+        code_a, code_b = encoded(self.actor.features_extractor)
+        actor_parts = _first_layer_products((self.actor.norm(code_a), self.actor.norm(code_b)), self.actor.mu)
         critic_parts = {q: _first_layer_products(encoded(c.features_extractor), c.head) for q, c in critics.items()}
         out = {q: np.empty((n, m) if aggregate != "none" else (c.n_members, n, m), dtype=np.float32)
                for q, c in critics.items()}

@@ -90,6 +90,8 @@ class TrainConfig:
     """one encoder for actor and critics, trained by the critic losses (default: for images)"""
     augmentation: Optional[str] = None
     """image augmentation of the shared encoder: None or 'shift' (DrQ's random shift)"""
+    actor_penalty: Optional[float] = None
+    """weight of the actor's pre-tanh penalty (default: 0.01 for panoramas, 0 for vectors)"""
     distance_bins: Optional[int] = None
     """bins of the distance distribution (default: the episode step limit)"""
     cost_bins: int = 40
@@ -232,6 +234,8 @@ def build_model(cfg: TrainConfig):
                                n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max, share_encoder=cfg.share_encoder,
                                features_extractor_kwargs={"net_arch": list(cfg.encoder_arch)}),
             augmentation=cfg.augmentation,
+            actor_preactivation_penalty=(cfg.actor_penalty if cfg.actor_penalty is not None
+                                         else (0.01 if image else 0.0)),
             tensorboard_log=cfg.tensorboard_log, verbose=cfg.verbose, seed=cfg.seed, device="cpu",
         )
     from .lagrangian import LagrangeMultiplier

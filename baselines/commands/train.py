@@ -60,6 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="one encoder for actor and critics, trained by the critic losses (default for images)")
     g.add_argument("--separate-encoders", dest="share_encoder", action="store_false",
                    help="an encoder per network (default for vectors)")
+    g.add_argument("--actor-penalty", type=float, default=None,
+                   help="weight of the actor's pre-tanh penalty (default: 0.01 for panoramas, 0 for vectors)")
     g.add_argument("--augmentation", choices=["shift"], default=None,
                    help="image augmentation of the shared encoder (DrQ's random shift)")
     g.add_argument("--distance-bins", type=int, default=None, help="default: the episode step limit")

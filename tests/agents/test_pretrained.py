@@ -61,3 +61,29 @@ def test_unknown_kind_or_env():
 def test_checkpoint_of_another_env_is_refused():
     with pytest.raises(CheckpointError, match="trained on"):
         load_pretrained("SafeCenterDot-v0", path=pretrained_path(ENV, "unconstrained"))
+
+
+APARTMENTS = sorted({e for e, _ in available() if e.startswith("SafeApartment")})
+
+
+@pytest.mark.parametrize("env_id", APARTMENTS)
+def test_shipped_apartment_agents_load_and_see_distances(env_id):
+    """Every shipped apartment has both stages, each under 10 MB, loadable on a CPU; the
+    unconstrained critic ranks goals by their true distance and the policy acts on panoramas."""
+    from scipy.stats import spearmanr
+
+    from agents.self_sampling import observations_at
+
+    env = gym.make(env_id)
+    s, g, geo = sample_problems(env, 60, np.random.default_rng(11), max_distance=4.0)
+    obs_s, obs_g = observations_at(env, s), observations_at(env, g)
+    for kind in ("unconstrained", "constrained"):
+        assert os.path.getsize(pretrained_path(env_id, kind)) < 10_000_000
+        m = load_pretrained(env_id, kind, device="cpu")
+        assert m.env_id == env_id and m.policy.share_encoder
+        assert m.constrained == (kind == "constrained")
+        actions, _ = m.predict({"observation": obs_s, "achieved_goal": obs_s, "desired_goal": obs_g},
+                               deterministic=True)
+        assert actions.shape == (60, 2) and np.all(np.abs(actions) <= 1.0)
+        rho = spearmanr(m.distance(obs_s, obs_g), geo).statistic
+        assert rho > 0.6, f"{env_id} {kind}: Spearman {rho:.3f}"

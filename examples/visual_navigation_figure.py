@@ -1,0 +1,136 @@
+"""Figures of visual navigation with the learned agents (the paper's Figures 3 and 2, analogues).
+
+    python examples/visual_navigation_figure.py                       # SafeApartment0-v0
+    python examples/visual_navigation_figure.py --env SafeApartment2-v0 --difficulty hard
+
+Writes two PNGs (default ``examples/figures/``):
+
+- ``visual_navigation.png``: one agent planned and driven by our method (constrained search on
+  the buffer graph of panoramas): the plan view with the executed path and the waypoints over
+  the cost field, the panoramas of the start, the goal and each waypoint (what the planner and
+  the controller work with), and a few of the panoramas the agent saw on the way. The plan
+  view is for the reader: the agent and the planner see panoramas only.
+- ``visual_multi_agent.png``: four agents on one problem, SoRB + CBS beside ours.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from panorama_contact_sheet import panorama_strip  # noqa: E402
+
+import safe_mapf_envs  # noqa: E402
+from agents import load_pretrained  # noqa: E402
+from baselines.evaluation import EvaluationSetup, make_problems  # noqa: E402
+from baselines.figures import trajectory_figure  # noqa: E402
+from baselines.methods import METHODS, execute  # noqa: E402
+
+HERE = Path(__file__).parent
+
+
+def pick_problem(setup: EvaluationSetup, difficulty: str, seed: int, tries: int = 20):
+    """The first single-agent problem on which ours plans through at least two waypoints."""
+    import safe_mapf_envs as sme
+
+    env = sme.parallel_env(setup.env_id, n_agents=1, max_cycles=300)
+    best = None
+    for prob in make_problems(setup, difficulty, 1, tries, seed=seed):
+        ex = execute(env, METHODS["ours"], setup.models, setup.planner, prob.starts, prob.goals, seed=seed)
+        n_wp = len(ex.extra.get("nodes", [[0]])[0]) - 1
+        if ex.success and n_wp >= 2:
+            return prob, ex, env
+        if best is None and ex.success:
+            best = (prob, ex)
+    if best is None:
+        raise RuntimeError(f"ours reached no {difficulty} goal in {tries} problems: train the agents longer")
+    return best[0], best[1], env
+
+
+def navigation_figure(setup: EvaluationSetup, difficulty: str, seed: int, path: Path, frames: int = 6) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    prob, ex, env = pick_problem(setup, difficulty, seed)
+    field = env.field
+    sensor = env.sensor
+    node_ids = np.asarray(ex.extra["nodes"][0][1:], dtype=np.int64)  # waypoints (start node excluded)
+    all_obs = np.concatenate([setup.observations, sensor.render(prob.starts), sensor.render(prob.goals)])
+    all_pos = np.concatenate([setup.states, prob.starts, prob.goals])
+    wp_obs, wp_pos = all_obs[node_ids], all_pos[node_ids]
+    traj = ex.trajectories[:, 0]
+    steps = np.unique(np.linspace(1, len(traj) - 2, frames).round().astype(int))
+    seen = sensor.render(traj[steps])
+    strips = ([("start", sensor.render(prob.starts)[0]), ("goal", sensor.render(prob.goals)[0])]
+              + [(f"waypoint {i + 1}", o) for i, o in enumerate(wp_obs)]
+              + [(f"step {t}", o) for t, o in zip(steps, seen)])
+    n_right = len(strips)
+    cols = 2
+    rows = int(np.ceil(n_right / cols))
+    fig = plt.figure(figsize=(15, max(6.0, 1.45 * rows)))
+    gs = fig.add_gridspec(rows, 1 + cols, width_ratios=[1.6] + [1.0] * cols)
+    ax = fig.add_subplot(gs[:, 0])
+    w, h = field.size
+    ax.imshow(field.cost_grid(0.05), origin="lower", extent=(0, w, 0, h), cmap="Reds", vmin=0, vmax=2.5)
+    for x0, y0, x1, y1 in field.boxes:
+        ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.25"))
+    ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:blue", lw=2, label="executed path")
+    ax.plot(wp_pos[:, 0], wp_pos[:, 1], "X", color="tab:orange", ms=10, mec="k", label="waypoints")
+    for i, p in enumerate(wp_pos):
+        ax.annotate(str(i + 1), p, textcoords="offset points", xytext=(6, 6), fontsize=10, weight="bold")
+    for t, p in zip(steps, traj[steps]):
+        ax.plot(*p, "o", color="white", ms=5, mec="tab:blue")
+        ax.annotate(f"t={t}", p, textcoords="offset points", xytext=(4, -12), fontsize=7, color="tab:blue")
+    ax.plot(*prob.starts[0], "o", color="tab:green", ms=11, mec="k", label="start")
+    ax.plot(*prob.goals[0], "*", color="tab:red", ms=17, mec="k", label="goal")
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)  # row 0 at the top, as the map and the renderer draw it
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.legend(loc="lower left", fontsize=8, framealpha=0.9)
+    ax.set_title(f"{setup.env_id}, {difficulty} problem: ours (constrained search + safe policy)\n"
+                 f"cumulative cost {ex.cost[0]:.2f}, {ex.steps} steps; plan view not seen by the agent",
+                 fontsize=10)
+    for k, (name, pano) in enumerate(strips):
+        a = fig.add_subplot(gs[k // cols, 1 + k % cols])
+        a.imshow(panorama_strip(pano, 2))
+        a.set_title(name, fontsize=9, color="tab:blue" if name.startswith("step") else "black")
+        a.axis("off")
+    fig.suptitle("What the planner and the agent work with: RGB-D panoramas (views N, E, S, W; depth below)",
+                 fontsize=11)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    env.close()
+    return path
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--env", default="SafeApartment0-v0")
+    p.add_argument("--unconstrained", default=None, help="checkpoint (default: the shipped one)")
+    p.add_argument("--constrained", default=None, help="checkpoint (default: the shipped one)")
+    p.add_argument("--difficulty", default="medium", choices=["easy", "medium", "hard"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--nodes", type=int, default=1000)
+    p.add_argument("--out", type=Path, default=HERE / "figures")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    models = {k: load_pretrained(args.env, k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
+    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
+    print(navigation_figure(setup, args.difficulty, args.seed, args.out / "visual_navigation.png"))
+    print(trajectory_figure(setup, [METHODS["sorb"], METHODS["ours"]], args.out / "visual_multi_agent.png",
+                            agent_counts=(4,), difficulty=args.difficulty, seed=args.seed, problems=(0,)))
+
+
+if __name__ == "__main__":
+    main()
