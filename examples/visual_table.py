@@ -1,0 +1,69 @@
+"""The Table II analogue: our four apartments beside the paper's four scenes, in one Markdown table.
+
+    for a in 0 1 2 3; do
+        safe-mapf evaluate --env SafeApartment$a-v0 --agents 1 5 10 --problems 50 --out results/apt$a
+    done
+    python examples/visual_table.py results/apt0 results/apt1 results/apt2 results/apt3
+
+Reads each folder's ``table.json`` (written by ``safe-mapf evaluate``) and prints, per
+apartment, difficulty and agent count, SoRB + CBS and ours (largest cumulative cost over
+agents, mean ± std over successful runs, success rate), with the paper's figures for the scene
+in the same position of its Table II. The paper's scenes are other apartments (ReplicaCAD in
+Habitat): the columns give scale, not a like-for-like comparison. A last column says whether
+ours is cheaper than SoRB + CBS in a multi-agent cell where ours succeeds in at least 90% of the
+runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from baselines.paper_tables import TABLE2, TABLE2_METHODS, TABLE2_SCENES
+
+
+def fmt(mean, std, rate) -> str:
+    if mean is None or (isinstance(mean, float) and math.isnan(mean)):
+        return f"- ({100 * rate:.0f}%)" if rate is not None else "n/a"
+    return f"{mean:.2f} ± {std:.2f} ({100 * rate:.0f}%)"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("folders", nargs="+", type=Path, help="safe-mapf evaluate output folders, one per apartment")
+    p.add_argument("--methods", nargs="+", default=["sorb", "ours"], help="our methods to show")
+    args = p.parse_args()
+    head = ["Ours: env", "paper: scene", "Problem", "Agents"]
+    for m in args.methods:
+        head += [f"ours: {m}"]
+    head += ["paper: sorb", "paper: ours", "ours < SoRB+CBS"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for i, folder in enumerate(args.folders):
+        rows = json.loads((folder / "table.json").read_text())
+        meta = folder / "table.md"
+        env_id = meta.read_text().split(":", 1)[0] if meta.exists() else folder.name
+        cell = {(r["difficulty"], r["agents"], r["method"]): r for r in rows}
+        scene = TABLE2_SCENES[i] if i < len(TABLE2_SCENES) else "-"
+        keys = sorted({(r["difficulty"], r["agents"]) for r in rows},
+                      key=lambda x: (["easy", "medium", "hard"].index(x[0]), x[1]))
+        for d, k in keys:
+            parts = [env_id, scene, d.capitalize(), str(k)]
+            for m in args.methods:
+                r = cell.get((d, k, m))
+                parts.append(fmt(r["cost_mean"], r["cost_std"], r["success_rate"]) if r else "n/a")
+            paper = TABLE2.get((scene, d, k))
+            for m in ("sorb", "ours"):
+                c = paper[TABLE2_METHODS.index(m)] if paper else None
+                parts.append(fmt(*c) if c else "n/a")
+            s, o = cell.get((d, k, "sorb")), cell.get((d, k, "ours"))
+            verdict = ""
+            if k > 1 and s and o and o["success_rate"] >= 0.9:
+                verdict = "yes" if (math.isnan(s["cost_mean"]) or o["cost_mean"] < s["cost_mean"]) else "**no**"
+            parts.append(verdict)
+            lines.append("| " + " | ".join(parts) + " |")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
