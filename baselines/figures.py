@@ -80,8 +80,11 @@ def trajectory_figure(
             ax.set_xticks([])
             ax.set_yticks([])
             ax.set_aspect("equal")
-    fig.suptitle(f"{setup.env_id}, {difficulty} problems: trajectories (lines), waypoints (x), "
-                 f"starts (o), goals (*) over the cost field", fontsize=9)
+    import textwrap
+
+    title = (f"{setup.env_id}, {difficulty} problems: trajectories (lines), waypoints (x), "
+             f"starts (o), goals (*) over the cost field")
+    fig.suptitle(textwrap.fill(title, width=max(40, int(22 * len(methods)))), fontsize=9)
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
