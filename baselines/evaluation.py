@@ -96,7 +96,7 @@ class EvaluationSetup:
         """Load the shipped checkpoints (unless ``models`` is given) and build the graph's nodes."""
         import gymnasium as gym
 
-        import safe_mapf_envs  # noqa: F401
+        import safe_mapf_envs
         from agents import load_pretrained
         from agents.self_sampling import observations_at
 
@@ -110,8 +110,6 @@ class EvaluationSetup:
         if "min_separation" not in kwargs:
             # a quarter more than the multi-agent env's own spacing of starts (2.5 units on the
             # 2D maps, 1.125 m on the apartments)
-            import safe_mapf_envs
-
             penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
             kwargs["min_separation"] = 1.25 * penv.min_separation
             penv.close()
