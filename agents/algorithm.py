@@ -276,7 +276,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             self.replay_buffer.seed(self.seed)
         self._create_aliases()
         self.augment = None
-        if getattr(self, "augmentation", None) == "shift" and self.policy.share_encoder:
+        if self.augmentation == "shift" and self.policy.share_encoder:
             self.augment = RandomShift(self.shift_pad, th.Generator().manual_seed(self.seed or 0))
         self._sampler = make_sampler(self.problem_sampler, **self.problem_sampler_kwargs)
         self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate if self.actor_learning_rate is not None
@@ -442,9 +442,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             a_loss = ((dist + lam * cost) / (1.0 + lam)).mean()
         else:
             a_loss = dist.mean()
-        penalty = getattr(self, "actor_preactivation_penalty", 0.0)
-        if penalty > 0:
-            a_loss = a_loss + penalty * pre.square().mean()
+        if self.actor_preactivation_penalty > 0:
+            a_loss = a_loss + self.actor_preactivation_penalty * pre.square().mean()
         self.actor.optimizer.zero_grad()
         a_loss.backward()
         self.actor.optimizer.step()

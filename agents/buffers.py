@@ -21,6 +21,7 @@ arrays, which environments with image goals can use to decide termination.
 """
 from __future__ import annotations
 
+import os
 from typing import Any, Callable, Dict, List, NamedTuple, Optional
 
 import numpy as np
@@ -207,8 +208,6 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         arrays["meta"] = np.array([self.pos, int(self.full), self.buffer_size, self.n_envs], dtype=np.int64)
         tmp = path + ".tmp.npz"
         np.savez(tmp, **arrays)
-        import os
-
         os.replace(tmp, path)
 
     def load_arrays(self, path: str) -> None:

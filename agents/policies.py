@@ -33,7 +33,8 @@ AGGREGATES = ("max", "mean", "min", "none")
 
 
 # --------------------------------------------------------------------------- encoders
-def _is_image_space(space: spaces.Space) -> bool:
+def is_image_space(space: spaces.Space) -> bool:
+    """Whether observations of ``space`` are images (a ``Box`` of three or more axes)."""
     return isinstance(space, spaces.Box) and len(space.shape) >= 3
 
 
@@ -176,7 +177,7 @@ class GoalPairExtractor(BaseFeaturesExtractor):
             raise ValueError("observation and desired_goal must share one encoder, so they need the same shape; got "
                              f"{obs_space.shape} and {goal_space.shape}")
         if encoder == "auto":
-            encoder = "cnn" if _is_image_space(obs_space) else "mlp"
+            encoder = "cnn" if is_image_space(obs_space) else "mlp"
         if encoder == "cnn":
             net: nn.Module = PanoramaEncoder(obs_space.shape, features_dim=features_dim, conv_layers=conv_layers,
                                              scale=1.0 / 255.0 if obs_space.dtype == np.uint8 else 1.0)
@@ -442,7 +443,7 @@ class SafeGoalPolicy(BasePolicy):
         self._distance_support = distance_support(self.n_distance_bins)
         self._cost_support = cost_support(self.n_cost_bins, self.cost_max)
         if share_encoder is None:
-            share_encoder = _is_image_space(observation_space["observation"])
+            share_encoder = is_image_space(observation_space["observation"])
         self.share_encoder = bool(share_encoder)
         self.actor_input_norm = self.share_encoder if actor_input_norm is None else bool(actor_input_norm)
         if optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs and "foreach" not in self.optimizer_kwargs:
@@ -494,6 +495,11 @@ class SafeGoalPolicy(BasePolicy):
 
         for target in (self.actor_target, self.critic_target, self.cost_critic_target):
             target.set_training_mode(False)
+        # the online networks' modules, each once (a shared encoder sits in three of them)
+        seen: Dict[int, nn.Module] = {}
+        for net in (self.actor, self.critic, self.cost_critic):
+            seen.update((id(m), m) for m in net.modules())
+        self._mode_modules = list(seen.values())
 
     def target_parameter_pairs(self) -> Tuple[List[th.Tensor], List[th.Tensor]]:
         """Parameters of the online networks and of their targets, aligned and each listed once
@@ -538,11 +544,6 @@ class SafeGoalPolicy(BasePolicy):
         # What ``actor/critic/cost_critic.set_training_mode`` do, with each module visited once
         # (SB3 toggles the mode on every environment step; a shared encoder sits in six places).
         mode = bool(mode)
-        if getattr(self, "_mode_modules", None) is None:
-            seen: Dict[int, nn.Module] = {}
-            for net in (self.actor, self.critic, self.cost_critic):
-                seen.update((id(m), m) for m in net.modules())
-            self._mode_modules = list(seen.values())
         for m in self._mode_modules:
             object.__setattr__(m, "training", mode)  # a plain flag: skip nn.Module's slow __setattr__
         self.training = mode
@@ -723,6 +724,7 @@ __all__ = [
     "GoalActor",
     "GoalPairExtractor",
     "MlpEncoder",
+    "is_image_space",
     "MultiInputPolicy",
     "PanoramaEncoder",
     "SafeGoalPolicy",

@@ -33,7 +33,7 @@ from stable_baselines3.common.logger import configure
 
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3
-from agents.policies import PanoramaEncoder
+from agents.policies import PanoramaEncoder, is_image_space
 
 
 @contextmanager
@@ -49,7 +49,7 @@ def plain_conv_stack() -> Iterator[None]:
 
 def make_model(env_id: str, share: Optional[bool], augmentation: Optional[str], batch: int) -> SafeGoalTD3:
     env = gym.make(env_id)
-    image = len(env.observation_space["observation"].shape) >= 3
+    image = is_image_space(env.observation_space["observation"])
     model = SafeGoalTD3(
         "MultiInputPolicy", env, batch_size=batch, learning_starts=0, seed=0, device="cpu",
         problem_sampler="uniform", augmentation=augmentation,

@@ -33,6 +33,7 @@ import torch
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3, load_pretrained
 from agents.evaluation import distance_rank_correlation, run_episodes, sample_problems
+from agents.policies import is_image_space
 from agents.self_sampling import observations_at
 from agents.training import default_eval_distances
 
@@ -55,10 +56,6 @@ class Settings:
     """largest geodesic distance of those pairs (default 15, 4 m on the apartments)"""
     n_nodes: int = 1000
     """observations for the D and C timing"""
-
-
-def gym_space_shape(env_id: str) -> tuple:
-    return gym.make(env_id).observation_space["observation"].shape
 
 
 def mark(ok: bool) -> str:
@@ -92,7 +89,8 @@ def main() -> None:
     lo, hi = default_eval_distances(s.env_id)
     s.max_distance = lo if s.max_distance is None else s.max_distance
     s.pair_max_distance = hi if s.pair_max_distance is None else s.pair_max_distance
-    visual = len(gym_space_shape(s.env_id)) >= 3
+    env = gym.make(s.env_id)
+    visual = is_image_space(env.observation_space["observation"])
     success_target, spearman_target = (0.9, 0.85) if visual else (0.95, 0.9)
     torch.set_num_threads(1)
 
@@ -100,7 +98,6 @@ def main() -> None:
         "unconstrained": load_pretrained(s.env_id, "unconstrained", path=args.unconstrained),
         "constrained": load_pretrained(s.env_id, "constrained", path=args.constrained),
     }
-    env = gym.make(s.env_id)
     rng = np.random.default_rng(s.seed)
     starts, goals, _ = sample_problems(env, s.n_episodes, rng, s.max_distance)
     ps, pg, pd = sample_problems(env, s.n_pairs, rng, s.pair_max_distance)
