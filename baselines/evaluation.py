@@ -21,8 +21,7 @@ from __future__ import annotations
 
 import csv
 import math
-import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Optional, Sequence
 
@@ -178,7 +177,26 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
-              "steps", "planning_time", "plan_status", "reached")
+              "steps", "planning_time", "plan_status", "reached", "c_max")
+
+#: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
+VALIDATION_SEED_OFFSET = 10_000
+#: quantiles of the graph's predicted edge costs that make the default c_max grid
+C_MAX_QUANTILES = (0.25, 0.5, 0.75)
+
+
+def _methods_for(methods: Sequence[Method], k: int, policy_agents: Optional[Sequence[int]],
+                 c_max_by_agents: Optional[Dict[int, float]]) -> List[Method]:
+    """The methods of a cell with ``k`` agents: policy-only ones only at ``policy_agents``
+    (``None``: everywhere), constrained searches with the cell's chosen ``c_max``."""
+    out = []
+    for m in methods:
+        if not m.search and policy_agents is not None and k not in policy_agents:
+            continue
+        if c_max_by_agents is not None and m.search and math.isfinite(m.c_max) and k in c_max_by_agents:
+            m = m.with_options(c_max=float(c_max_by_agents[k]))
+        out.append(m)
+    return out
 
 
 def evaluate(
@@ -191,25 +209,32 @@ def evaluate(
     max_cycles: int = 300,
     progress: bool = True,
     on_run=None,
+    policy_agents: Optional[Sequence[int]] = None,
+    c_max_by_agents: Optional[Dict[int, float]] = None,
+    desc: str = "evaluate",
 ) -> List[Dict[str, Any]]:
     """Run every method on the same problems; one row per (method, agents, difficulty, problem).
 
-    ``on_run(row, problem, execution)`` is called after each run (e.g. to keep trajectories).
+    ``policy_agents`` restricts the methods without search to these agent counts (the paper's
+    Table II runs them on single agents only); ``c_max_by_agents`` sets the cost cut-off of the
+    constrained searches per agent count (e.g. chosen by :func:`select_c_max`). Rows carry the
+    ``c_max`` a method used (``inf`` for distance pruning only). ``on_run(row, problem,
+    execution)`` is called after each run (e.g. to keep trajectories).
     """
     import safe_mapf_envs
 
     cells = [(k, d) for k in agent_counts for d in difficulties]
-    total = len(cells) * n_problems * len(methods)
+    total = sum(len(_methods_for(methods, k, policy_agents, c_max_by_agents)) for k, _ in cells) * n_problems
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=total, desc="evaluate", unit="run", mininterval=2.0)
+        bar = tqdm(total=total, desc=desc, unit="run", mininterval=2.0)
     rows: List[Dict[str, Any]] = []
     for k, d in cells:
         problems = make_problems(setup, d, k, n_problems, seed=seed)
         env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=k, max_cycles=max_cycles)
-        for m in methods:
+        for m in _methods_for(methods, k, policy_agents, c_max_by_agents):
             for prob in problems:
                 ex = execute(env, m, setup.models, setup.planner, prob.starts, prob.goals,
                              seed=seed + prob.index)
@@ -218,6 +243,7 @@ def evaluate(
                     "success": ex.success, "cost_max": float(ex.cost.max()), "cost_mean": float(ex.cost.mean()),
                     "collisions": ex.collisions, "steps": ex.steps, "planning_time": ex.planning_time,
                     "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
+                    "c_max": m.c_max if m.search else math.inf,
                 }
                 rows.append(row)
                 if on_run is not None:
@@ -229,6 +255,91 @@ def evaluate(
     if bar is not None:
         bar.close()
     return rows
+
+
+def c_max_grid(setup: EvaluationSetup, quantiles: Sequence[float] = C_MAX_QUANTILES) -> List[float]:
+    """Candidate cost cut-offs: quantiles of the positive predicted costs of the distance-pruned
+    graph's edges.
+
+    The scale of edge costs differs between maps (on CentralObstacle most edges lie far from
+    the obstacle and cost nothing; on the apartments, where most free space lies within the
+    cost radius, the median edge costs about 3), so the grid is taken from the graph rather
+    than fixed.
+    """
+    keep = (setup.D < setup.d_max) & (setup.C > 0)
+    np.fill_diagonal(keep, False)
+    costs = setup.C[keep]
+    if not len(costs):
+        raise ValueError(f"the graph has no edge shorter than d_max={setup.d_max:g} with a positive cost")
+    return sorted({float(f"{np.quantile(costs, q):.3g}") for q in quantiles})
+
+
+@dataclass
+class CMaxSelection:
+    """The outcome of :func:`select_c_max`.
+
+    Attributes:
+        chosen: agent count -> the cut-off chosen for it.
+        grid: the candidates.
+        seed: the seed of the validation problems (never the test seed).
+        table: per (agent count, candidate): success rate and mean largest cost over the
+            successful validation runs.
+        rows: the validation runs, one row each, with their ``c_max``.
+    """
+
+    chosen: Dict[int, float]
+    grid: List[float]
+    seed: int
+    table: List[Dict[str, Any]]
+    rows: List[Dict[str, Any]]
+
+
+def select_c_max(
+    setup: EvaluationSetup,
+    method: Method,
+    agent_counts: Sequence[int],
+    difficulties: Sequence[str] = tuple(DIFFICULTIES),
+    grid: Optional[Sequence[float]] = None,
+    n_problems: int = 10,
+    seed: int = VALIDATION_SEED_OFFSET,
+    test_seed: Optional[int] = None,
+    success_slack: float = 0.05,
+    max_cycles: int = 300,
+    progress: bool = True,
+) -> CMaxSelection:
+    """Choose the cost cut-off of a constrained search per agent count on validation problems.
+
+    Each candidate of ``grid`` (default :func:`c_max_grid`) runs ``method`` on ``n_problems``
+    problems per difficulty drawn with ``seed``, which must differ from ``test_seed`` (the seed
+    the reported table is made with; problems are drawn from ``[seed, agents, difficulty]``, so
+    another seed gives other problems). Per agent count, among the candidates whose success
+    rate is within ``success_slack`` of the best one, the one with the lowest mean largest
+    cumulative cost over its successful runs wins (ties: the larger cut-off, the denser graph).
+    """
+    if not method.search or not math.isfinite(method.c_max):
+        raise ValueError(f"method {method.name!r} has no cost cut-off to choose")
+    if test_seed is not None and seed == test_seed:
+        raise ValueError(f"the validation seed must differ from the test seed {test_seed}: "
+                         "choosing c_max on the test problems would overstate the method")
+    grid = c_max_grid(setup) if grid is None else sorted(float(c) for c in grid)
+    if not grid or any(not c > 0 for c in grid):
+        raise ValueError(f"the c_max grid needs positive values, got {grid!r}")
+    rows: List[Dict[str, Any]] = []
+    for c in grid:
+        rows += evaluate(setup, [method.with_options(c_max=c)], agent_counts, difficulties, n_problems, seed=seed,
+                         max_cycles=max_cycles, progress=progress, desc=f"validate c_max={c:g}")
+    table, chosen = [], {}
+    for k in agent_counts:
+        stats = []
+        for c in grid:
+            rs = [r for r in rows if r["agents"] == k and r["c_max"] == c]
+            ok = [r["cost_max"] for r in rs if r["success"]]
+            stats.append((c, len(ok) / len(rs), float(np.mean(ok)) if ok else math.inf))
+            table.append({"agents": k, "c_max": c, "success_rate": stats[-1][1], "cost_mean": stats[-1][2]})
+        best = max(s for _, s, _ in stats)
+        eligible = [(cost, -c) for c, s, cost in stats if s >= best - success_slack]
+        chosen[k] = -min(eligible)[1]
+    return CMaxSelection(chosen, list(grid), int(seed), table, rows)
 
 
 def _mean_std(x: np.ndarray):
@@ -309,5 +420,6 @@ def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
         w.writerows(rows)
 
 
-__all__ = ["DIFFICULTIES", "EvaluationSetup", "Problem", "ROW_FIELDS", "aggregate", "evaluate", "make_problems",
-           "markdown_table", "write_csv"]
+__all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "ROW_FIELDS",
+           "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "make_problems", "markdown_table",
+           "select_c_max", "write_csv"]

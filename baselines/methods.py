@@ -160,7 +160,7 @@ def execute(
         plans = direct_plans(g, names)
     planning_time = time.perf_counter() - t0
     ctrl = WaypointController(policy_fn(model), distance_fn(model), plans, reach_threshold=reach_threshold,
-                              safety_radius=safety_radius)
+                              safety_radius=safety_radius, seed=seed)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
@@ -185,6 +185,8 @@ def execute(
         touching = now
     extra["yields"] = ctrl.stats.yields
     extra["waits"] = ctrl.stats.waits
+    extra["escapes"] = ctrl.stats.escapes
+    extra["skips"] = ctrl.stats.skips
     return Execution(bool(reached.all()), reached, cost, steps, collisions, planning_time, status,
                      np.stack(traj), extra)
 

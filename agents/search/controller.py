@@ -10,13 +10,19 @@ current waypoint's observation. Rules, all from observations only:
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
   first, ties broken by index); the paper states this rule, we implement it;
+- **unstick**: an agent that was free to move but whose observation has hardly changed over
+  ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
+  other) takes ``escape_steps`` random actions (more if it gets stuck again); stuck ``skip_after`` times on the way to the
+  same waypoint, it gives that waypoint up and heads for the next one. A deterministic policy
+  that pushes into a wall would otherwise push there until the episode ends;
 - **replan** (optional): a callback asked for a new plan when an agent falls more than
   ``replan_lag`` steps behind its plan.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Deque, Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -33,11 +39,17 @@ class AgentPlan:
         goal: the final goal observation.
         depart_times: for each waypoint, the earliest environment step at which the agent may
             leave it (``None``: leave as soon as it is reached).
+        starts_at_first: the agent stands at ``waypoints[0]`` when the plan begins (the
+            planner's start node), so that waypoint counts as reached without asking the
+            critic. A learned distance from an observation to itself is not zero (on the
+            apartments it is 1.2-3 steps, above a reach threshold of 2), and an agent sent
+            towards its own position moves away from it and may never come back.
     """
 
     waypoints: np.ndarray
     goal: np.ndarray
     depart_times: Optional[Sequence[int]] = None
+    starts_at_first: bool = False
 
 
 @dataclass
@@ -46,6 +58,8 @@ class ControllerStats:
     yields: int = 0
     waits: int = 0
     replans: int = 0
+    escapes: int = 0
+    skips: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
 
 
@@ -65,6 +79,18 @@ class WaypointController:
             symmetrised by taking the smaller direction).
         replan: optional ``replan(agent, obs, plan) -> AgentPlan`` called when an agent is more
             than ``replan_lag`` steps behind its plan.
+        stuck_window: steps over which an agent free to move counts as stuck when its
+            observation changed by less than ``stuck_tolerance`` (``None`` disables unsticking).
+        stuck_tolerance: mean absolute change of the observation over ``stuck_window`` steps,
+            in the observation's own scale (``uint8`` images divided by 255): below it the agent
+            is stuck. On the apartments one step (0.25 m) changes a panorama by about 0.05 and
+            the jitter of an agent pressed against a wall by under 0.01; on the 2D maps
+            (positions divided by the world size) 0.01 is half a unit a step on a 55-unit map.
+        escape_steps: random actions an agent takes once it is found stuck (doubled for every
+            further time it is stuck on the way to the same target, up to 8 times as many).
+        skip_after: times an agent may be stuck on the way to one waypoint before it heads for
+            the next one.
+        seed: seed of the escape actions.
     """
 
     def __init__(
@@ -77,7 +103,16 @@ class WaypointController:
         proximity: Optional[PairFn] = None,
         replan: Optional[Callable[[str, np.ndarray, AgentPlan], AgentPlan]] = None,
         replan_lag: int = 20,
+        stuck_window: Optional[int] = 4,
+        stuck_tolerance: float = 0.01,
+        escape_steps: int = 3,
+        skip_after: int = 2,
+        seed: Optional[int] = 0,
     ) -> None:
+        if stuck_window is not None and stuck_window < 1:
+            raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
+        if escape_steps < 1 or skip_after < 1:
+            raise ValueError(f"escape_steps and skip_after must be >= 1, got {escape_steps!r}, {skip_after!r}")
         self.policy = policy
         self.distance = distance
         self.plans = dict(plans)
@@ -86,7 +121,16 @@ class WaypointController:
         self.proximity = proximity
         self.replan = replan
         self.replan_lag = int(replan_lag)
+        self.stuck_window = stuck_window
+        self.stuck_tolerance = float(stuck_tolerance)
+        self.escape_steps = int(escape_steps)
+        self.skip_after = int(skip_after)
+        self.rng = np.random.default_rng(seed)
+        self._recent: Dict[str, Deque[np.ndarray]] = {a: deque(maxlen=(stuck_window or 0) + 1) for a in self.plans}
+        self._escape = {a: 0 for a in self.plans}
+        self._stuck_count = {a: 0 for a in self.plans}
         self.index = {a: 0 for a in self.plans}
+        self._at_start = {a: p.starts_at_first and len(p.waypoints) > 0 for a, p in self.plans.items()}
         self.t = 0
         self.stats = ControllerStats()
 
@@ -113,6 +157,7 @@ class WaypointController:
         for _ in range(4):
             goals = np.stack([self.current_goal(a) for a in live])
             d = np.asarray(self.distance(obs, goals), dtype=np.float64)
+            d[[self._at_start[a] and self.index[a] == 0 for a in live]] = -np.inf
             moved = False
             for i, a in enumerate(live):
                 plan = self.plans[a]
@@ -121,6 +166,7 @@ class WaypointController:
                     if plan.depart_times is not None and self.t < int(plan.depart_times[k]):
                         continue
                     self.index[a] = k + 1
+                    self._stuck_count[a] = 0
                     moved = True
             if not moved:
                 break
@@ -132,22 +178,55 @@ class WaypointController:
             plan = self.plans[a]
             k = self.index[a]
             if plan.depart_times is not None and k < len(plan.waypoints) and self.t < int(plan.depart_times[k]):
-                if self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self.reach_threshold:
+                if (k == 0 and self._at_start[a]) or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self.reach_threshold:
                     hold[i] = True
                     self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
             hold |= self._yield_mask(live, obs)
+        if self.stuck_window is not None:
+            self._unstick(live, obs, hold, actions)
         actions[hold] = 0.0
         if self.replan is not None:
             for i, a in enumerate(live):
                 if self._lag(a) > self.replan_lag:
                     self.plans[a] = self.replan(a, obs[i], self.plans[a])
                     self.index[a] = 0
+                    self._at_start[a] = self.plans[a].starts_at_first and len(self.plans[a].waypoints) > 0
                     self.stats.replans += 1
         self.t += 1
         self.stats.steps = self.t
         self.stats.waypoint_index = dict(self.index)
         return {a: actions[i] for i, a in enumerate(live)}
+
+    def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray) -> None:
+        """Replace the actions of stuck agents free to move by random ones (edits ``actions``)."""
+        scale = 255.0 if obs.dtype == np.uint8 else 1.0
+        for i, a in enumerate(live):
+            recent = self._recent[a]
+            if hold[i]:  # standing still on purpose is not being stuck
+                recent.clear()
+                continue
+            if self._escape[a] > 0:
+                self._escape[a] -= 1
+                actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
+                recent.clear()
+                continue
+            recent.append(obs[i].astype(np.float32) / scale)
+            if len(recent) < recent.maxlen:
+                continue
+            if float(np.abs(recent[-1] - recent[0]).mean()) >= self.stuck_tolerance:
+                continue
+            recent.clear()
+            self.stats.escapes += 1
+            self._stuck_count[a] += 1
+            # escapes grow with each consecutive one on the way to the same target (up to 8x)
+            self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
+            k = self.index[a]
+            if self._stuck_count[a] >= self.skip_after and k < len(self.plans[a].waypoints):
+                self.index[a] = k + 1  # this waypoint seems out of reach: head for the next one
+                self._stuck_count[a] = 0
+                self.stats.skips += 1
+            actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
 
     def _yield_mask(self, live: List[str], obs: np.ndarray) -> np.ndarray:
         n = len(live)

@@ -114,7 +114,7 @@ class MultiAgentPlan:
             if hold == "waits":
                 depart = [d if d > a else 0 for d, a in zip(depart, self.node_arrivals[i])]
             out[names[i]] = AgentPlan(waypoints=obs[np.asarray(self.nodes[i], dtype=np.int64)],
-                                      goal=np.asarray(goals[i]), depart_times=depart)
+                                      goal=np.asarray(goals[i]), depart_times=depart, starts_at_first=True)
         return out
 
 

@@ -18,15 +18,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="unconstrained checkpoint (default: the shipped one for --env)")
     p.add_argument("--constrained", default=None, metavar="PATH",
                    help="constrained checkpoint (default: the shipped one for --env)")
-    p.add_argument("--agents", type=int, nargs="+", default=[1, 5, 10, 20], metavar="N", help="agent counts")
-    p.add_argument("--problems", type=int, default=50, metavar="P", help="problems per difficulty (default 50)")
+    p.add_argument("--agents", type=_positive, nargs="+", default=[1, 5, 10, 20], metavar="N", help="agent counts")
+    p.add_argument("--problems", type=_positive, default=50, metavar="P", help="problems per difficulty (default 50)")
     p.add_argument("--difficulty", nargs="+", choices=list(DIFFICULTIES), default=list(DIFFICULTIES))
     p.add_argument("--methods", nargs="+", choices=list(METHODS), default=list(METHODS),
                    help=f"default: all; the paper's four are {', '.join(PAPER_METHODS)}")
-    p.add_argument("--seed", type=int, default=0, help="seed of the graph nodes and the problems")
-    p.add_argument("--nodes", type=int, default=1000, help="buffer graph nodes (default 1000)")
-    p.add_argument("--c-max", type=float, default=None,
-                   help="edge cost cut-off of the constrained searches (default: the methods' own)")
+    p.add_argument("--seed", type=_non_negative, default=0, help="seed of the graph nodes and the problems")
+    p.add_argument("--nodes", type=_positive, default=1000, help="buffer graph nodes (default 1000)")
+    p.add_argument("--c-max", type=_c_max, default=None,
+                   help="edge cost cut-off of the constrained searches: a number, or 'auto' to choose it per "
+                        "agent count on validation problems drawn with --validation-seed (never the test "
+                        "problems) from --c-max-grid (default: the methods' own, 0.25)")
+    p.add_argument("--c-max-grid", type=float, nargs="+", default=None, metavar="C",
+                   help="candidates of --c-max auto (default: the 25/50/75%% quantiles of the graph's edge costs)")
+    p.add_argument("--validation-problems", type=_positive, default=10, metavar="P",
+                   help="validation problems per difficulty and candidate for --c-max auto (default 10)")
+    p.add_argument("--validation-seed", type=_non_negative, default=None, metavar="S",
+                   help="seed of the validation problems (default: --seed + 10000; must differ from --seed)")
+    p.add_argument("--policies-at", type=_positive, nargs="+", default=None, metavar="N",
+                   help="run the methods without search only at these agent counts (the paper's Table II: 1; "
+                        "default: every count)")
     p.add_argument("--budget", type=float, default=None, help="risk budget of ours_budget")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
@@ -35,6 +46,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the aggregate rows as JSON instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def _c_max(text: str):
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'auto', got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"c_max must be > 0, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,15 +89,19 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from baselines.evaluation import EvaluationSetup, aggregate, evaluate, markdown_table, write_csv
+    from baselines.evaluation import (VALIDATION_SEED_OFFSET, EvaluationSetup, aggregate, evaluate, markdown_table,
+                                      select_c_max, write_csv)
     from baselines.methods import get_methods
 
     if args.problems < 1 or min(args.agents) < 1:
         raise ValueError("--problems and --agents must be >= 1")
+    if args.c_max == "auto" and args.validation_seed == args.seed:
+        raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
+                         "test problems")
     torch.set_num_threads(1)
     methods = get_methods(dict.fromkeys(args.methods))
     opts = {}
-    if args.c_max is not None:
+    if args.c_max is not None and args.c_max != "auto":
         opts["c_max"] = args.c_max
     methods = [m.with_options(**opts) if m.search and math.isfinite(m.c_max) and opts else m for m in methods]
     if args.budget is not None:
@@ -65,10 +112,27 @@ def run(args: argparse.Namespace) -> int:
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
-    rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
-                    max_cycles=args.max_cycles, progress=not args.no_progress and not args.json)
-    agg = aggregate(rows)
+    progress = not args.no_progress and not args.json
     out = Path(args.out)
+    chosen = None
+    if args.c_max == "auto":
+        constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]
+        if not constrained:
+            raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
+        vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
+        sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
+                           n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
+                           max_cycles=args.max_cycles, progress=progress)
+        chosen = sel.chosen
+        write_csv(sel.rows, out / "validation_runs.csv")
+        (out / "c_max.json").write_text(json.dumps(
+            {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
+             "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
+             "table": sel.table}, indent=1))
+    rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
+                    max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
+                    c_max_by_agents=chosen)
+    agg = aggregate(rows)
     write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
     (out / "table.json").write_text(json.dumps(agg, indent=1))
@@ -77,12 +141,20 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     header = (f"{args.env}: largest cumulative cost over agents, mean ± std over successful runs "
               f"(success rate); {args.problems} problems per cell, seed {args.seed}, {wall:.0f} s\n\n")
+    if chosen is not None:
+        header += ("c_max chosen on validation problems (seed " + str(sel.seed) + "): "
+                   + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
     (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
     if args.figure:
         from baselines.figures import trajectory_figure
 
-        trajectory_figure(setup, methods, out / "figure.png", seed=args.seed)
+        fig_methods = methods
+        if chosen is not None:  # the figure's multi-agent row has 4 agents: the nearest count's cut-off
+            k = min(chosen, key=lambda n: (abs(n - 4), n))
+            fig_methods = [m.with_options(c_max=chosen[k]) if m.search and math.isfinite(m.c_max) else m
+                           for m in methods]
+        trajectory_figure(setup, fig_methods, out / "figure.png", seed=args.seed)
     if args.json:
         print(json.dumps(agg))
     else:

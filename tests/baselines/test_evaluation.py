@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from baselines.evaluation import EvaluationSetup, aggregate, evaluate, make_problems, markdown_table, write_csv
+from baselines.evaluation import (EvaluationSetup, aggregate, c_max_grid, evaluate, make_problems, markdown_table,
+                                 write_csv)
 from baselines.methods import METHODS, execute, get_methods
 
 
@@ -123,3 +124,100 @@ def test_evaluate_command_with_shipped_checkpoints(tmp_path, capsys):
     table = (tmp_path / "table.md").read_text()
     assert "Constrained Search (Ours, CBS)" in table and "| Easy | 2 |" in table
     assert (tmp_path / "runs.csv").exists() and (tmp_path / "table.csv").exists()
+
+
+def test_policy_only_methods_run_only_where_asked(setup):
+    rows = evaluate(setup, get_methods(["unconstrained_policy", "sorb"]), agent_counts=[1, 2], difficulties=["easy"],
+                    n_problems=1, progress=False, policy_agents=[1])
+    cells = {(r["method"], r["agents"]) for r in rows}
+    assert cells == {("unconstrained_policy", 1), ("sorb", 1), ("sorb", 2)}
+    assert all(math.isinf(r["c_max"]) for r in rows)
+
+
+def test_c_max_grid_comes_from_the_graph(setup):
+    grid = c_max_grid(setup)
+    keep = (setup.D < setup.d_max) & (setup.C > 0)
+    np.fill_diagonal(keep, False)
+    costs = setup.C[keep]
+    assert grid == sorted(grid) and 1 <= len(grid) <= 3
+    assert costs.min() <= grid[0] and grid[-1] <= costs.max()
+    assert grid[len(grid) // 2] == pytest.approx(np.median(costs), rel=1e-2)
+
+
+def test_c_max_is_chosen_on_validation_problems_only(setup, monkeypatch):
+    """select_c_max draws every problem with the validation seed, refuses the test seed, and the
+    chosen cut-off per agent count is the cheapest among the most successful candidates."""
+    import baselines.evaluation as ev
+
+    seeds = []
+    real = ev.make_problems
+
+    def spy(s, difficulty, n_agents, n_problems, seed=0, **kw):
+        seeds.append(seed)
+        return real(s, difficulty, n_agents, n_problems, seed=seed, **kw)
+
+    monkeypatch.setattr(ev, "make_problems", spy)
+    grid = [0.05, 1.0, 50.0]
+    sel = ev.select_c_max(setup, METHODS["ours"], [1, 2], ["hard"], grid=grid, n_problems=2, seed=123, test_seed=0,
+                          progress=False)
+    assert seeds and set(seeds) == {123}
+    assert set(sel.chosen) == {1, 2} and all(c in grid for c in sel.chosen.values())
+    assert sel.seed == 123 and {r["c_max"] for r in sel.rows} == set(grid)
+    for k in (1, 2):
+        cands = [t for t in sel.table if t["agents"] == k]
+        best = max(t["success_rate"] for t in cands)
+        ok = [t for t in cands if t["success_rate"] >= best - 0.05]
+        assert sel.chosen[k] == min(ok, key=lambda t: (t["cost_mean"], -t["c_max"]))["c_max"]
+    # test problems are drawn with another seed and so differ from the validation ones
+    val = real(setup, "hard", 2, 2, seed=123)
+    test = real(setup, "hard", 2, 2, seed=0)
+    assert any((a.start_nodes != b.start_nodes).any() for a, b in zip(val, test))
+    with pytest.raises(ValueError, match="validation seed must differ from the test seed"):
+        ev.select_c_max(setup, METHODS["ours"], [1], grid=grid, seed=0, test_seed=0, progress=False)
+    with pytest.raises(ValueError, match="no cost cut-off"):
+        ev.select_c_max(setup, METHODS["sorb"], [1], grid=grid, seed=1, test_seed=0, progress=False)
+    with pytest.raises(ValueError, match="positive"):
+        ev.select_c_max(setup, METHODS["ours"], [1], grid=[0.0, 1.0], seed=1, test_seed=0, progress=False)
+
+
+def test_evaluate_command_c_max_auto_writes_its_choice(tmp_path, capsys):
+    import json
+
+    from baselines.cli import main
+
+    code = main(["evaluate", "--agents", "1", "2", "--problems", "1", "--difficulty", "hard", "--methods",
+                 "unconstrained_policy", "ours", "--policies-at", "1", "--nodes", "150", "--no-figure", "--json",
+                 "--c-max", "auto", "--c-max-grid", "0.1", "5", "--validation-problems", "1", "--seed", "3",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    agg = json.loads(capsys.readouterr().out)
+    assert {(a["method"], a["agents"]) for a in agg} == {("unconstrained_policy", 1), ("ours", 1), ("ours", 2)}
+    choice = json.loads((tmp_path / "c_max.json").read_text())
+    assert choice["validation_seed"] == 10003 and choice["test_seed"] == 3
+    assert set(choice["chosen"]) == {"1", "2"} and set(choice["chosen"].values()) <= {0.1, 5.0}
+    runs = (tmp_path / "runs.csv").read_text().splitlines()
+    assert "c_max" in runs[0].split(",")
+    assert "c_max chosen on validation problems (seed 10003)" in (tmp_path / "table.md").read_text()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--c-max", "lots"], "positive number or 'auto'"),
+    (["--c-max", "-1"], "c_max must be > 0"),
+    (["--nodes", "0"], "positive integer"),
+    (["--seed", "-1"], "non-negative integer"),
+    (["--policies-at", "0"], "positive integer"),
+])
+def test_evaluate_command_rejects_bad_arguments(argv, message, capsys):
+    from baselines.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["evaluate", *argv])
+    assert message in capsys.readouterr().err
+
+
+def test_evaluate_command_refuses_validation_on_the_test_seed(tmp_path, capsys):
+    from baselines.cli import main
+
+    assert main(["evaluate", "--c-max", "auto", "--validation-seed", "0", "--seed", "0", "--out", str(tmp_path)]) == 2
+    assert "--validation-seed must differ from --seed" in capsys.readouterr().err
+    assert not (tmp_path / "runs.csv").exists()

@@ -94,3 +94,83 @@ def test_replan_is_called_when_an_agent_falls_behind():
     for _ in range(10):
         ctrl.act(obs)
     assert calls == ["agent_0"] and ctrl.stats.replans == 1
+
+
+def offset_steps(obs, goal):
+    """Like a learned critic: never zero, even from an observation to itself (2.5 steps more)."""
+    return euclid_steps(obs, goal) + 2.5
+
+
+def test_the_start_waypoint_counts_as_reached_whatever_the_critic_says():
+    """A planner's start node is where the agent stands: with a critic whose distance from an
+    observation to itself is above the reach threshold, the agent must still move on."""
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    start = np.array([[5.0, 5.0]], np.float32) / SIZE
+    goal = np.array([20, 5], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, offset_steps,
+                              {"agent_0": AgentPlan(start, goal, depart_times=[0], starts_at_first=True)},
+                              reach_threshold=2.0, safety_radius=None)
+    trail = run(env, ctrl, limit=40)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0
+    # without the flag the agent heads for its own start and never gets closer than 2.5 "steps"
+    ctrl = WaypointController(straight_policy, offset_steps, {"agent_0": AgentPlan(start, goal, depart_times=[0])},
+                              reach_threshold=2.0, safety_radius=None, stuck_window=None)
+    trail = run(env, ctrl, limit=40)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [20, 5]) > 10.0
+
+
+def test_the_start_waypoint_still_holds_until_its_departure_time():
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    start = np.array([[5.0, 5.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, offset_steps,
+                              {"agent_0": AgentPlan(start, np.array([20, 5], np.float32) / SIZE, depart_times=[10],
+                                                    starts_at_first=True)},
+                              reach_threshold=2.0, safety_radius=None)
+    trail = run(env, ctrl, limit=40)["agent_0"]
+    np.testing.assert_allclose(trail[:11], np.repeat([[5.0, 5.0]], 11, axis=0), atol=1e-6)
+    assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0 and ctrl.stats.escapes == 0
+
+
+def wall_pusher(obs, goal):
+    """A policy that pushes straight down into the wall below, wherever the goal is."""
+    return np.tile(np.array([0.0, -1.0], np.float32), (len(obs), 1))
+
+
+def test_a_stuck_agent_escapes_with_random_actions_and_gives_up_the_waypoint():
+    """Pressed against the wall, the agent's observation stops changing: the controller takes
+    random actions instead (reproducibly from its seed) and, stuck twice on the way to the same
+    waypoint, moves on to the next target."""
+    wp = np.array([[5.0, 0.2]], np.float32) / SIZE  # in the wall: an agent centre never gets within 0.3
+    goal = np.array([40, 40], np.float32) / SIZE
+    trails = []
+    for _ in range(2):
+        env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
+        ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                                  reach_threshold=0.1, safety_radius=None, seed=3)
+        trails.append(run(env, ctrl, limit=40)["agent_0"])
+        assert ctrl.stats.escapes >= 2 and ctrl.stats.skips == 1
+        assert ctrl.index["agent_0"] == 1  # now heading for the goal
+    np.testing.assert_array_equal(trails[0], trails[1])
+    # off: pressed against the wall to the end
+    env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
+    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                              reach_threshold=0.1, safety_radius=None, stuck_window=None)
+    trail = run(env, ctrl, limit=40)["agent_0"]
+    assert ctrl.stats.escapes == 0 and np.ptp(trail[10:], axis=0).max() < 1e-3
+
+
+def test_waiting_on_purpose_is_not_being_stuck():
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    wp = np.array([[5.0, 5.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[25])},
+                              reach_threshold=1.0, safety_radius=None)
+    run(env, ctrl, limit=60)
+    assert ctrl.stats.waits >= 20 and ctrl.stats.escapes == 0
+
+
+def test_unstick_arguments_are_checked():
+    with pytest.raises(ValueError, match="stuck_window"):
+        WaypointController(straight_policy, euclid_steps, {}, stuck_window=0)
+    with pytest.raises(ValueError, match="escape_steps"):
+        WaypointController(straight_policy, euclid_steps, {}, escape_steps=0)
