@@ -132,12 +132,18 @@ def execute(
     reach_threshold: float = 2.0,
     safety_radius: float = 2.0,
     hold: Optional[str] = None,
+    ban_radius: float = 3.0,
 ) -> Execution:
     """Run ``method`` from positions ``starts`` to ``goals`` in the parallel env ``env``.
 
     Positions only place the agents (the environment's reset); the planner and the agents
     see observations. The run ends when every agent is at its goal or at ``env.max_cycles``.
     ``hold`` overrides the method's (see :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`).
+    A search method's agent that gets stuck on the way to a waypoint (see
+    :class:`~agents.search.controller.WaypointController`) gets a new single-agent plan from
+    its current observation on the same graph, without the buffer nodes it failed to reach
+    and those within ``ban_radius`` predicted steps of them (a buffer graph has many nodes at
+    almost the same place, and the critic that misjudged one edge misjudges their edges too).
     """
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -147,6 +153,7 @@ def execute(
     t0 = time.perf_counter()
     status = "direct"
     extra: Dict[str, Any] = {}
+    replan = None
     if method.search:
         if planner is None:
             raise ValueError(f"method {method.name!r} needs a planner")
@@ -156,11 +163,36 @@ def execute(
         extra = {"c_max_used": plan.c_max, "soc": plan.soc, "waypoints": [len(x) for x in plan.nodes],
                  "predicted_cost": plan.predicted_cost, "nodes": plan.nodes}
         plans = plan.agent_plans(p.last_observations, g, names, hold=hold or method.hold) if plan.solved else direct_plans(g, names)
+        routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else [] for i, a in enumerate(names)}
+        banned: Dict[str, List[int]] = {a: [] for a in names}
+        n_nodes = len(p.observations)
+        extra["replan_time"] = 0.0
+
+        def replan(agent: str, ob: np.ndarray, current):
+            t1 = time.perf_counter()
+            k = ctrl.index[agent]
+            route = routes[agent]
+            # the failed waypoint (on the last leg: the waypoint the goal was approached from) and
+            # the nodes right by it
+            f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
+            if f < n_nodes:
+                near = np.minimum(p.D[f], p.D[:, f]) < ban_radius
+                banned[agent].extend(np.flatnonzero(near).tolist() + [f])
+            i = names.index(agent)
+            sub = p.plan(ob[None], g[i:i + 1], budget=method.budget, exclude=banned[agent])
+            if sub.solved:
+                new = sub.agent_plans(p.last_observations, g[i:i + 1], [agent], hold="waits")[agent]
+                routes[agent] = list(sub.nodes[0])
+            else:  # no other way on the graph: give the waypoint up
+                new = type(current)(current.waypoints[k + 1:], current.goal)
+                routes[agent] = route[k + 1:]
+            extra["replan_time"] += time.perf_counter() - t1
+            return new
     else:
         plans = direct_plans(g, names)
     planning_time = time.perf_counter() - t0
     ctrl = WaypointController(policy_fn(model), distance_fn(model), plans, reach_threshold=reach_threshold,
-                              safety_radius=safety_radius, seed=seed)
+                              safety_radius=safety_radius, seed=seed, replan=replan)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
@@ -187,6 +219,7 @@ def execute(
     extra["waits"] = ctrl.stats.waits
     extra["escapes"] = ctrl.stats.escapes
     extra["skips"] = ctrl.stats.skips
+    extra["replans"] = ctrl.stats.replans
     return Execution(bool(reached.all()), reached, cost, steps, collisions, planning_time, status,
                      np.stack(traj), extra)
 

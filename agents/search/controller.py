@@ -12,11 +12,13 @@ current waypoint's observation. Rules, all from observations only:
   first, ties broken by index); the paper states this rule, we implement it;
 - **unstick**: an agent that was free to move but whose observation has hardly changed over
   ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
-  other) takes ``escape_steps`` random actions (more if it gets stuck again); stuck ``skip_after`` times on the way to the
-  same waypoint, it gives that waypoint up and heads for the next one. A deterministic policy
-  that pushes into a wall would otherwise push there until the episode ends;
-- **replan** (optional): a callback asked for a new plan when an agent falls more than
-  ``replan_lag`` steps behind its plan.
+  other) takes ``escape_steps`` random actions (more if it gets stuck again); stuck
+  ``skip_after`` times on the way to the same target, it asks ``replan`` for a new plan from
+  where it stands (without one, it gives a waypoint up and heads for the next one). A
+  deterministic policy that pushes into a wall would otherwise push there until the episode
+  ends;
+- **replan** (optional): a callback asked for a new plan when an agent is stuck (above), or
+  when it falls more than ``replan_lag`` steps behind its plan.
 """
 from __future__ import annotations
 
@@ -77,8 +79,12 @@ class WaypointController:
         proximity: ``proximity(obs_a[B, ...], obs_b[B, ...]) -> [B]`` distance between agents'
             observations, in the same units as ``safety_radius`` (default: ``distance``,
             symmetrised by taking the smaller direction).
-        replan: optional ``replan(agent, obs, plan) -> AgentPlan`` called when an agent is more
-            than ``replan_lag`` steps behind its plan.
+        replan: optional ``replan(agent, obs, plan) -> AgentPlan``, called with the agent's
+            current observation when it is stuck (see ``skip_after``) or more than
+            ``replan_lag`` steps behind its plan; :attr:`index` still points at the target it
+            failed to reach when it is called.
+        replan_lag: lag (steps since leaving the previous waypoint) that triggers ``replan``
+            (``None``: replan only when stuck).
         stuck_window: steps over which an agent free to move counts as stuck when its
             observation changed by less than ``stuck_tolerance`` (``None`` disables unsticking).
         stuck_tolerance: mean absolute change of the observation over ``stuck_window`` steps,
@@ -88,8 +94,8 @@ class WaypointController:
             (positions divided by the world size) 0.01 is half a unit a step on a 55-unit map.
         escape_steps: random actions an agent takes once it is found stuck (doubled for every
             further time it is stuck on the way to the same target, up to 8 times as many).
-        skip_after: times an agent may be stuck on the way to one waypoint before it heads for
-            the next one.
+        skip_after: times an agent may be stuck on the way to one target before it replans
+            (or, without ``replan``, heads for the next waypoint).
         seed: seed of the escape actions.
     """
 
@@ -102,7 +108,7 @@ class WaypointController:
         safety_radius: Optional[float] = 3.0,
         proximity: Optional[PairFn] = None,
         replan: Optional[Callable[[str, np.ndarray, AgentPlan], AgentPlan]] = None,
-        replan_lag: int = 20,
+        replan_lag: Optional[int] = None,
         stuck_window: Optional[int] = 4,
         stuck_tolerance: float = 0.01,
         escape_steps: int = 3,
@@ -120,7 +126,7 @@ class WaypointController:
         self.safety_radius = safety_radius
         self.proximity = proximity
         self.replan = replan
-        self.replan_lag = int(replan_lag)
+        self.replan_lag = None if replan_lag is None else int(replan_lag)
         self.stuck_window = stuck_window
         self.stuck_tolerance = float(stuck_tolerance)
         self.escape_steps = int(escape_steps)
@@ -186,17 +192,21 @@ class WaypointController:
         if self.stuck_window is not None:
             self._unstick(live, obs, hold, actions)
         actions[hold] = 0.0
-        if self.replan is not None:
+        if self.replan is not None and self.replan_lag is not None:
             for i, a in enumerate(live):
                 if self._lag(a) > self.replan_lag:
-                    self.plans[a] = self.replan(a, obs[i], self.plans[a])
-                    self.index[a] = 0
-                    self._at_start[a] = self.plans[a].starts_at_first and len(self.plans[a].waypoints) > 0
-                    self.stats.replans += 1
+                    self._replan(a, obs[i])
         self.t += 1
         self.stats.steps = self.t
         self.stats.waypoint_index = dict(self.index)
         return {a: actions[i] for i, a in enumerate(live)}
+
+    def _replan(self, agent: str, obs: np.ndarray) -> None:
+        self.plans[agent] = self.replan(agent, obs, self.plans[agent])
+        self.index[agent] = 0
+        self._at_start[agent] = self.plans[agent].starts_at_first and len(self.plans[agent].waypoints) > 0
+        self._stuck_count[agent] = 0
+        self.stats.replans += 1
 
     def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray) -> None:
         """Replace the actions of stuck agents free to move by random ones (edits ``actions``)."""
@@ -222,10 +232,13 @@ class WaypointController:
             # escapes grow with each consecutive one on the way to the same target (up to 8x)
             self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
             k = self.index[a]
-            if self._stuck_count[a] >= self.skip_after and k < len(self.plans[a].waypoints):
-                self.index[a] = k + 1  # this waypoint seems out of reach: head for the next one
-                self._stuck_count[a] = 0
-                self.stats.skips += 1
+            if self._stuck_count[a] >= self.skip_after:
+                if self.replan is not None:  # the target seems out of reach from here: a new plan
+                    self._replan(a, obs[i])
+                elif k < len(self.plans[a].waypoints):  # no planner: head for the next target
+                    self.index[a] = k + 1
+                    self._stuck_count[a] = 0
+                    self.stats.skips += 1
             actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
 
     def _yield_mask(self, live: List[str], obs: np.ndarray) -> np.ndarray:

@@ -306,7 +306,8 @@ class BufferPlanner:
         np.fill_diagonal(keep, False)
         return keep
 
-    def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None) -> MultiAgentPlan:
+    def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
+             exclude: Optional[Sequence[int]] = None) -> MultiAgentPlan:
         """Plan for agents starting at observations ``starts[i]`` and going to ``goals[i]``.
 
         ``budget`` (optional) bounds each agent's total predicted cost: every agent's route is
@@ -314,8 +315,15 @@ class BufferPlanner:
         or a Lagrangian one within the budget if the exact search exceeds ``budget_labels``;
         the cheapest route if none fits), and CBS then times the agents on the graph induced by
         the nodes of those routes.
+
+        ``exclude`` (optional) lists buffer nodes (ids ``0..N-1``) the plan must not use, e.g.
+        a waypoint an agent failed to reach when it replans.
         """
         t0 = time.perf_counter()
+        n_buf = len(self.observations)
+        ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
+        if len(ex) and (ex.min() < 0 or ex.max() >= n_buf):
+            raise ValueError(f"exclude must hold buffer node ids in [0, {n_buf}), got {ex.tolist()}")
         D, C, obs = self.problem_matrices(starts, goals)
         k = len(starts)
         n = len(self.observations)
@@ -323,7 +331,9 @@ class BufferPlanner:
         g_ids = list(range(n + k, n + 2 * k))
         self.last_observations, self.last_D, self.last_C = obs, D, C
         keep = self._edges(D, C, k, self.c_max)
-        ok, c_max = self._connect(keep, D, C, s_ids, g_ids)
+        keep[ex, :] = False
+        keep[:, ex] = False
+        ok, c_max = self._connect(keep, D, C, s_ids, g_ids, ex)
         rows, cols = np.nonzero(keep)
         dist = sparse.csr_matrix((np.maximum(D[rows, cols], 1e-9), (rows, cols)), shape=D.shape)
         costm = sparse.csr_matrix((np.maximum(C[rows, cols], 1e-12), (rows, cols)), shape=D.shape)
@@ -337,11 +347,14 @@ class BufferPlanner:
             graph = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
         durations = graph.distance.copy()
         durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0) if self.time_model == "durative" else np.ones_like(durations.data)
-        prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
-        res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
-                        suboptimality=self.suboptimality, time_limit=self.time_limit)
+        if k == 1:  # one agent has nobody to conflict with: CBS's answer is the shortest timed path
+            res = self._single_agent_path(durations, s_ids[0], g_ids[0])
+        else:
+            prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
+            res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
+                            suboptimality=self.suboptimality, time_limit=self.time_limit)
         fb = self.fallback_suboptimality
-        if res.status == "timeout" and fb is not None and fb > self.suboptimality:
+        if k > 1 and res.status == "timeout" and fb is not None and fb > self.suboptimality:
             res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
                             suboptimality=fb, time_limit=self.time_limit)
         out = MultiAgentPlan(res.status, soc=res.soc, makespan=res.makespan, c_max=c_max, cbs=res,
@@ -351,6 +364,20 @@ class BufferPlanner:
             out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
         out.planning_time = time.perf_counter() - t0
         return out
+
+    def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
+        """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""
+        dist, pred = dijkstra(durations, directed=True, indices=s, return_predecessors=True)
+        if not np.isfinite(dist[g]):
+            return CBSResult("infeasible", message="no path from start to goal")
+        nodes = [g]
+        while nodes[-1] != s:
+            nodes.append(int(pred[nodes[-1]]))
+        nodes.reverse()
+        path = [(int(v), int(round(dist[v]))) for v in nodes]
+        t = int(round(dist[g]))
+        return CBSResult("optimal", paths=[path], soc=t, makespan=t, lower_bound=t,
+                         message="a single agent: shortest path", time_model=self.time_model)
 
     def _proximity_matrix(self, D: np.ndarray, k: int) -> np.ndarray:
         """Node distances for proximity conflicts; starts among themselves (and goals among
@@ -362,7 +389,7 @@ class BufferPlanner:
             P[lo:lo + k, lo:lo + k] = np.inf
         return P
 
-    def _connect(self, keep: np.ndarray, D: np.ndarray, C: np.ndarray, s_ids, g_ids):
+    def _connect(self, keep: np.ndarray, D: np.ndarray, C: np.ndarray, s_ids, g_ids, exclude: Optional[np.ndarray] = None):
         """Relax the cost cut-off locally until every agent's goal is reachable (edits ``keep``).
 
         For an agent without a path, the edges leaving the region its start reaches (and the
@@ -380,6 +407,9 @@ class BufferPlanner:
         short[n + k:, :] = False
         short[n:n + k, n + k:] = False
         short[s_ids, g_ids] = D[s_ids, g_ids] < self.d_max
+        if exclude is not None and len(exclude):
+            short[exclude, :] = False
+            short[:, exclude] = False
         c_top = float(C[short].max()) if short.any() else 0.0
         while True:
             g = sparse.csr_matrix(keep)

@@ -174,3 +174,23 @@ def test_unstick_arguments_are_checked():
         WaypointController(straight_policy, euclid_steps, {}, stuck_window=0)
     with pytest.raises(ValueError, match="escape_steps"):
         WaypointController(straight_policy, euclid_steps, {}, escape_steps=0)
+
+
+def test_a_stuck_agent_asks_for_a_new_plan_when_it_can():
+    wp = np.array([[5.0, 0.2], [9.0, 9.0]], np.float32) / SIZE
+    goal = np.array([40, 40], np.float32) / SIZE
+    seen = []
+
+    def replan(agent, obs, plan):
+        seen.append((agent, ctrl.index[agent], obs.copy()))
+        return AgentPlan(np.zeros((0, 2), np.float32), plan.goal)
+
+    env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
+    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                              reach_threshold=0.1, safety_radius=None, replan=replan)
+    run(env, ctrl, limit=30)
+    assert ctrl.stats.replans == 1 and ctrl.stats.skips == 0
+    agent, index, obs = seen[0]
+    assert agent == "agent_0" and index == 0  # it was still heading for the unreachable waypoint
+    assert obs[1] * SIZE < 1.0  # asked from where it was stuck, against the wall
+    assert len(ctrl.plans["agent_0"].waypoints) == 0 and ctrl.index["agent_0"] == 0

@@ -152,3 +152,41 @@ def test_agents_starting_side_by_side_can_be_planned():
         if {u, v} <= {n, n + 1} or {u, v} <= {n + 2, n + 3}:
             continue
         assert min(D[u, v], D[v, u]) >= 1.5
+
+
+def test_excluded_nodes_are_never_used():
+    """A replanning agent can forbid the nodes it failed to reach: the plan goes around them,
+    and forbidding every way through leaves the agent without a plan."""
+    pts = grid_points(7)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=None, suboptimality=1.0)
+    start, goal = np.array([[0.0, 3.0]]), np.array([[6.0, 3.0]])
+    free = planner.plan(start, goal)
+    row = [i for i, p in enumerate(pts) if p[1] == 3.0 and 0 < p[0] < 6]
+    assert set(row) <= set(free.nodes[0])  # the straight row is the shortest way
+    wall = [i for i, p in enumerate(pts) if p[0] == 3.0 and p[1] >= 2.0]
+    around = planner.plan(start, goal, exclude=wall)
+    assert around.solved and not set(wall) & set(around.nodes[0])
+    assert min(pts[i][1] for i in around.nodes[0] if i < len(pts)) <= 1.0  # went below the wall
+    assert around.soc > free.soc
+    blocked = planner.plan(start, goal, exclude=[i for i, p in enumerate(pts) if p[0] == 3.0])
+    assert blocked.status == "infeasible"
+    with pytest.raises(ValueError, match="exclude must hold buffer node ids"):
+        planner.plan(start, goal, exclude=[len(pts)])
+
+
+@pytest.mark.parametrize("time_model", ["durative", "unit"])
+def test_a_single_agent_gets_the_path_cbs_would_give(time_model):
+    pts = grid_points(6)
+    planner = make_planner(pts, euclid_pairwise(hot=(2.5, 2.5), hot_radius=1.2), d_max=2.5, c_max=0.5,
+                           proximity_radius=1.2, suboptimality=1.0, time_model=time_model)
+    start, goal = np.array([[0.0, 0.0]]), np.array([[5.0, 5.0]])
+    plan = planner.plan(start, goal)
+    assert plan.status == "optimal" and plan.cbs.message.startswith("a single agent")
+    dur = planner.last_graph.distance.copy()
+    dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0) if time_model == "durative" else np.ones_like(dur.data)
+    n = len(pts)
+    from agents.search.cbs import solve_cbs
+
+    ref = solve_cbs(dur, [n], [n + 1], time_model=time_model, suboptimality=1.0)
+    assert plan.soc == ref.soc
+    assert validate(dur, [n], [n + 1], plan.cbs.paths, time_model=time_model) == []
