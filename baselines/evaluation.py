@@ -349,7 +349,8 @@ def _mean_std(x: np.ndarray):
 
 
 def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
-    """Per (method, agents, difficulty): success rate and mean +- std over successful runs."""
+    """Per (method, agents, difficulty): success rate, mean +- std over successful runs, and the
+    median of the largest cumulative cost over them (``cost_median``)."""
     groups: Dict[tuple, List[Dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["agents"]), r["difficulty"]), []).append(r)
@@ -364,6 +365,8 @@ def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
             agg[f"{name}_mean"], agg[f"{name}_std"] = mu, sd
         agg["mean_cost_mean"] = agg.pop("cost_mean_mean")
         agg["mean_cost_std"] = agg.pop("cost_mean_std")
+        # robust to the few runs in which an agent stalls for a long time
+        agg["cost_median"] = float(np.median([float(r["cost_max"]) for r in ok])) if ok else math.nan
         out.append(agg)
     return out
 

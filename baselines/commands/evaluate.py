@@ -1,4 +1,4 @@
-"""``safe-mapf evaluate``: the paper's Table I (and Figure 1) regenerated on a 2D map."""
+"""``safe-mapf evaluate``: the paper's Table I (and Figure 1) on a 2D map, its Table II on an apartment."""
 from __future__ import annotations
 
 import argparse
@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from baselines.evaluation import DIFFICULTIES
     from baselines.methods import METHODS, PAPER_METHODS
 
-    p = sub.add_parser("evaluate", help="compare the methods on the same problems (Table I, Figure 1)",
+    p = sub.add_parser("evaluate", help="compare the methods on the same problems (Tables I and II, Figure 1)",
                        description=run.__doc__)
     p.add_argument("--env", default="SafeCentralObstacle-v0", help="env id with shipped checkpoints")
     p.add_argument("--unconstrained", default=None, metavar="PATH",

@@ -9,7 +9,7 @@ import torch as th
 import safe_mapf_envs  # noqa: F401
 from agents import CheckpointError, SafeGoalTD3, load_pretrained
 from agents.evaluation import run_episodes, sample_problems
-from agents.pretrained import available, pretrained_path
+from agents.pretrained import KINDS, available, pretrained_path
 
 th.set_num_threads(1)
 ENV = "SafeCentralObstacle-v0"
@@ -64,6 +64,10 @@ def test_checkpoint_of_another_env_is_refused():
 
 
 APARTMENTS = sorted({e for e, _ in available() if e.startswith("SafeApartment")})
+
+
+def test_every_apartment_ships_both_stages():
+    assert set(available()) >= {(f"SafeApartment{k}-v0", kind) for k in range(4) for kind in KINDS}
 
 
 @pytest.mark.parametrize("env_id", APARTMENTS)

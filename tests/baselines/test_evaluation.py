@@ -93,6 +93,7 @@ def test_aggregate_hand_computed():
     assert m["cost_mean"] == pytest.approx(2.0) and m["cost_std"] == pytest.approx(1.0)
     assert m["mean_cost_mean"] == pytest.approx(1.0)
     assert m["steps_mean"] == pytest.approx(15.0)
+    assert m["cost_median"] == pytest.approx(2.0) and math.isnan(agg["n"]["cost_median"])
     assert agg["n"]["success_rate"] == 0 and math.isnan(agg["n"]["cost_mean"])
     table = markdown_table(list(agg.values()), ["m", "n"], bold_min_success=0.5)
     lines = table.splitlines()
