@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from agents.search.controller import WaypointController
+from agents.search.controller import AgentPlan, WaypointController
 from agents.search.planner import BufferPlanner, direct_plans
 
 
@@ -168,7 +168,8 @@ def execute(
         n_nodes = len(p.observations)
         extra["replan_time"] = 0.0
 
-        def replan(agent: str, ob: np.ndarray, current):
+        def replan(agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
+            # called by the controller below (``ctrl``), which exists by the time an agent is stuck
             t1 = time.perf_counter()
             k = ctrl.index[agent]
             route = routes[agent]
@@ -184,7 +185,7 @@ def execute(
                 new = sub.agent_plans(p.last_observations, g[i:i + 1], [agent], hold="waits")[agent]
                 routes[agent] = list(sub.nodes[0])
             else:  # no other way on the graph: give the waypoint up
-                new = type(current)(current.waypoints[k + 1:], current.goal)
+                new = AgentPlan(current.waypoints[k + 1:], current.goal)
                 routes[agent] = route[k + 1:]
             extra["replan_time"] += time.perf_counter() - t1
             return new

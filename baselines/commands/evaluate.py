@@ -92,8 +92,6 @@ def run(args: argparse.Namespace) -> int:
                                       select_c_max, write_csv)
     from baselines.methods import get_methods
 
-    if args.problems < 1 or min(args.agents) < 1:
-        raise ValueError("--problems and --agents must be >= 1")
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
                          "test problems")
