@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any, Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
-from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from agents.search.planner import BufferPlanner
@@ -77,17 +76,13 @@ class EvaluationSetup:
     planner: BufferPlanner = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        keep = self.D < self.d_max
-        np.fill_diagonal(keep, False)
-        r, c = np.nonzero(keep)
-        n = len(self.states)
-        g = sparse.csr_matrix((np.maximum(self.D[r, c], 1e-9), (r, c)), shape=(n, n))
-        self.shortest = dijkstra(g, directed=True)
         unc = self.models["unconstrained"]
         self.planner = BufferPlanner(
             self.observations, self.D, self.C, lambda a, b: unc.pairwise(a, b, aggregate="max"),
             d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
             time_limit=self.cbs_time_limit)
+        # problem difficulty: shortest predicted distances on the planner's own buffer graph
+        self.shortest = dijkstra(self.planner.buffer_graph.distance, directed=True)
 
     @classmethod
     def build(cls, env_id: str = "SafeCentralObstacle-v0", n_nodes: int = 1000, seed: int = 0,
@@ -266,9 +261,9 @@ def c_max_grid(setup: EvaluationSetup, quantiles: Sequence[float] = C_MAX_QUANTI
     cost radius, the median edge costs about 3), so the grid is taken from the graph rather
     than fixed.
     """
-    keep = (setup.D < setup.d_max) & (setup.C > 0)
-    np.fill_diagonal(keep, False)
-    costs = setup.C[keep]
+    src, dst, _, _ = setup.planner.buffer_graph.edge_arrays()
+    costs = setup.C[src, dst]
+    costs = costs[costs > 0]
     if not len(costs):
         raise ValueError(f"the graph has no edge shorter than d_max={setup.d_max:g} with a positive cost")
     return sorted({float(f"{np.quantile(costs, q):.3g}") for q in quantiles})

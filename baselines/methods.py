@@ -19,14 +19,13 @@ for every method, the same yield rule between agents.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from agents.search.controller import AgentPlan, WaypointController
-from agents.search.planner import BufferPlanner, direct_plans
+from agents.search.planner import BufferPlanner
+from agents.search.policy import SearchPolicy, distance_fn, policy_fn
 
 
 @dataclass(frozen=True)
@@ -102,25 +101,6 @@ class Execution:
     extra: Dict[str, Any] = field(default_factory=dict)
 
 
-def policy_fn(model):
-    """``policy(obs[B], goal[B]) -> actions[B, 2]`` from a goal-conditioned SB3 model (deterministic)."""
-
-    def act(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        batch = {"observation": obs, "achieved_goal": obs, "desired_goal": goals}
-        return model.predict(batch, deterministic=True)[0]
-
-    return act
-
-
-def distance_fn(model):
-    """``distance(obs[B], goal[B]) -> [B]`` predicted steps (pessimistic ensemble)."""
-
-    def dist(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        return model.distance(obs, goals, aggregate="max")
-
-    return dist
-
-
 def execute(
     env,
     method: Method,
@@ -138,62 +118,22 @@ def execute(
 
     Positions only place the agents (the environment's reset); the planner and the agents
     see observations. The run ends when every agent is at its goal or at ``env.max_cycles``.
-    ``hold`` overrides the method's (see :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`).
-    A search method's agent that gets stuck on the way to a waypoint (see
-    :class:`~agents.search.controller.WaypointController`) gets a new single-agent plan from
-    its current observation on the same graph, without the buffer nodes it failed to reach
-    and those within ``ban_radius`` predicted steps of them (a buffer graph has many nodes at
-    almost the same place, and the critic that misjudged one edge misjudges their edges too).
+    Every method runs as a :class:`~agents.search.policy.SearchPolicy` (without a planner for
+    the methods without search): ``hold`` overrides the method's (see
+    :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`); a search method's stuck agent
+    replans on the same graph without the nodes within ``ban_radius`` of the waypoint it
+    failed to reach.
     """
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
-    o = np.stack([obs[a]["observation"] for a in names])
-    g = np.stack([obs[a]["desired_goal"] for a in names])
-    model = models[method.policy]
-    t0 = time.perf_counter()
-    status = "direct"
-    extra: Dict[str, Any] = {}
-    replan = None
+    planner_m = None
     if method.search:
         if planner is None:
             raise ValueError(f"method {method.name!r} needs a planner")
-        p = planner.with_options(c_max=method.c_max) if planner.c_max != method.c_max else planner
-        plan = p.plan(o, g, budget=method.budget)
-        status = plan.status
-        extra = {"c_max_used": plan.c_max, "soc": plan.soc, "waypoints": [len(x) for x in plan.nodes],
-                 "predicted_cost": plan.predicted_cost, "nodes": plan.nodes}
-        plans = plan.agent_plans(p.last_observations, g, names, hold=hold or method.hold) if plan.solved else direct_plans(g, names)
-        routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else [] for i, a in enumerate(names)}
-        banned: Dict[str, List[int]] = {a: [] for a in names}
-        n_nodes = len(p.observations)
-        extra["replan_time"] = 0.0
-
-        def replan(agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
-            # called by the controller below (``ctrl``), which exists by the time an agent is stuck
-            t1 = time.perf_counter()
-            k = ctrl.index[agent]
-            route = routes[agent]
-            # the failed waypoint (on the last leg: the waypoint the goal was approached from) and
-            # the nodes right by it
-            f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
-            if f < n_nodes:
-                near = np.minimum(p.D[f], p.D[:, f]) < ban_radius
-                banned[agent].extend(np.flatnonzero(near).tolist() + [f])
-            i = names.index(agent)
-            sub = p.plan(ob[None], g[i:i + 1], budget=method.budget, exclude=banned[agent])
-            if sub.solved:
-                new = sub.agent_plans(p.last_observations, g[i:i + 1], [agent], hold="waits")[agent]
-                routes[agent] = list(sub.nodes[0])
-            else:  # no other way on the graph: give the waypoint up
-                new = AgentPlan(current.waypoints[k + 1:], current.goal)
-                routes[agent] = route[k + 1:]
-            extra["replan_time"] += time.perf_counter() - t1
-            return new
-    else:
-        plans = direct_plans(g, names)
-    planning_time = time.perf_counter() - t0
-    ctrl = WaypointController(policy_fn(model), distance_fn(model), plans, reach_threshold=reach_threshold,
-                              safety_radius=safety_radius, seed=seed, replan=replan)
+        planner_m = planner.with_options(c_max=method.c_max) if planner.c_max != method.c_max else planner
+    policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
+                          reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
+                          seed=seed)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
@@ -203,7 +143,7 @@ def execute(
     traj = [env.positions]
     steps = 0
     while env.agents:
-        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        actions, _ = policy.predict({a: obs[a] for a in env.agents})
         obs, _, term, trunc, infos = env.step(actions)
         steps += 1
         traj.append(env.positions)
@@ -216,13 +156,16 @@ def execute(
                 reached[i] = True
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
-    extra["yields"] = ctrl.stats.yields
-    extra["waits"] = ctrl.stats.waits
-    extra["escapes"] = ctrl.stats.escapes
-    extra["skips"] = ctrl.stats.skips
-    extra["replans"] = ctrl.stats.replans
-    return Execution(bool(reached.all()), reached, cost, steps, collisions, planning_time, status,
-                     np.stack(traj), extra)
+    plan = policy.current_plan
+    extra: Dict[str, Any] = {}
+    if plan is not None:
+        extra = {"c_max_used": plan.c_max, "soc": plan.soc, "waypoints": [len(x) for x in plan.nodes],
+                 "predicted_cost": plan.predicted_cost, "nodes": plan.nodes, "replan_time": policy.replan_time}
+    stats = policy.stats
+    extra.update(yields=stats.yields, waits=stats.waits, escapes=stats.escapes, skips=stats.skips,
+                 replans=stats.replans)
+    return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
+                     plan.status if plan is not None else "direct", np.stack(traj), extra)
 
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "Execution", "METHODS", "Method", "PAPER_METHODS",

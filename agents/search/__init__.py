@@ -11,18 +11,23 @@ without a critic.
 - :class:`BufferPlanner`: CBS waypoints for many agents on the buffer graph, with learned
   proximity and durative edges;
 - :class:`WaypointController`: executes the plans in the PettingZoo environment (closed-loop
-  advance, planned departure times, yield rule).
+  advance, planned departure times, yield rule);
+- :class:`SearchPolicy`: all of the above as one object with an SB3-style ``predict`` for a
+  Gymnasium goal-conditioned observation or a PettingZoo parallel env's observations;
+- :func:`build_problem_graph`: the one pipeline from critic matrices to a problem's pruned graph
+  (endpoint attachment, cost cut-off, local relaxation), used by the planner.
 """
 from .cbs import CBSResult, CBSSolver, solve_cbs
 from .controller import AgentPlan, WaypointController
-from .graph import WaypointGraph
+from .graph import ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf_instance import MapfInstance, Proximity, integer_durations
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+from .policy import SearchPolicy, distance_fn, policy_fn
 from .single import Plan, risk_bounded_path, shortest_path
 from .validate import validate
 
 __all__ = [
-    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "Proximity",
-    "WaypointController", "WaypointGraph", "direct_plans", "integer_durations", "risk_bounded_path",
-    "shortest_path", "solve_cbs", "validate",
+    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "ProblemGraph",
+    "Proximity", "SearchPolicy", "WaypointController", "WaypointGraph", "build_problem_graph", "direct_plans",
+    "distance_fn", "integer_durations", "policy_fn", "risk_bounded_path", "shortest_path", "solve_cbs", "validate",
 ]

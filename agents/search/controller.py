@@ -184,7 +184,8 @@ class WaypointController:
             plan = self.plans[a]
             k = self.index[a]
             if plan.depart_times is not None and k < len(plan.waypoints) and self.t < int(plan.depart_times[k]):
-                if (k == 0 and self._at_start[a]) or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self.reach_threshold:
+                at_start = k == 0 and self._at_start[a]
+                if at_start or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self.reach_threshold:
                     hold[i] = True
                     self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
@@ -201,11 +202,18 @@ class WaypointController:
         self.stats.waypoint_index = dict(self.index)
         return {a: actions[i] for i, a in enumerate(live)}
 
-    def _replan(self, agent: str, obs: np.ndarray) -> None:
-        self.plans[agent] = self.replan(agent, obs, self.plans[agent])
+    def set_plan(self, agent: str, plan: AgentPlan) -> None:
+        """Give ``agent`` a new plan from now on (it starts at the plan's first waypoint)."""
+        if agent not in self.plans:
+            raise KeyError(f"unknown agent {agent!r}; agents are {sorted(self.plans)}")
+        self.plans[agent] = plan
         self.index[agent] = 0
-        self._at_start[agent] = self.plans[agent].starts_at_first and len(self.plans[agent].waypoints) > 0
+        self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
         self._stuck_count[agent] = 0
+
+    def _replan(self, agent: str, obs: np.ndarray) -> None:
+        assert self.replan is not None
+        self.set_plan(agent, self.replan(agent, obs, self.plans[agent]))
         self.stats.replans += 1
 
     def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray) -> None:
@@ -222,7 +230,7 @@ class WaypointController:
                 recent.clear()
                 continue
             recent.append(obs[i].astype(np.float32) / scale)
-            if len(recent) < recent.maxlen:
+            if len(recent) < (recent.maxlen or 0):
                 continue
             if float(np.abs(recent[-1] - recent[0]).mean()) >= self.stuck_tolerance:
                 continue
@@ -248,6 +256,7 @@ class WaypointController:
             prox = np.asarray(self.proximity(obs[ii], obs[jj]), dtype=np.float64)
         else:
             prox = np.minimum(np.asarray(self.distance(obs[ii], obs[jj])), np.asarray(self.distance(obs[jj], obs[ii])))
+        assert self.safety_radius is not None  # checked by the caller
         close = prox < self.safety_radius
         if not close.any():
             return np.zeros(n, dtype=bool)
@@ -258,9 +267,9 @@ class WaypointController:
         winner = np.where(i_first, ii, jj)[close]
         hold = np.zeros(n, dtype=bool)
         # process pairs in priority order so a yielding agent does not also block others
-        for w, l in sorted(zip(winner, loser)):
+        for w, yielder in sorted(zip(winner, loser)):
             if not hold[w]:
-                hold[l] = True
+                hold[yielder] = True
         self.stats.yields += int(hold.sum())
         return hold
 

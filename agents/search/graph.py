@@ -10,13 +10,35 @@ The graph never calls the environment; it takes matrices (from the critics, or a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
 import zipfile
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Tuple, Union
+from typing import Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from scipy import sparse
+from scipy.sparse.csgraph import dijkstra
+
+#: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
+PairwiseFn = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
+
+
+#: sparse storage drops zeros, so kept edges carry at least these weights
+_MIN_DISTANCE = 1e-9
+_MIN_COST = 1e-12
+
+
+def _short_and_cheap(D: np.ndarray, C: np.ndarray, d_max: float, c_max: float) -> np.ndarray:
+    """The pruning rule of every graph in this package: ``D < d_max`` and ``C < c_max``."""
+    return (D < d_max) & (C < c_max)
+
+
+def edge_mask(D: np.ndarray, C: np.ndarray, d_max: float, c_max: float) -> np.ndarray:
+    """Boolean ``(N, N)`` mask of the edges a graph over dense ``D``, ``C`` keeps (no self-loops)."""
+    keep = _short_and_cheap(D, C, d_max, c_max)
+    np.fill_diagonal(keep, False)
+    return keep
 
 
 def _check_matrix(m: np.ndarray, name: str, shape: Optional[Tuple[int, int]] = None) -> np.ndarray:
@@ -79,13 +101,28 @@ class WaypointGraph:
             raise ValueError(f"c_max must be > 0, got {c_max!r}")
         if observations is not None and len(observations) != D.shape[0]:
             raise ValueError(f"{len(observations)} observations for a {D.shape[0]}-node matrix")
-        keep = (D < d_max) & (C < c_max)
-        np.fill_diagonal(keep, False)
+        return cls.from_mask(D, C, edge_mask(D, C, d_max, c_max), observations, d_max, c_max, positions)
+
+    @classmethod
+    def from_mask(
+        cls,
+        D: np.ndarray,
+        C: np.ndarray,
+        keep: np.ndarray,
+        observations: Optional[np.ndarray] = None,
+        d_max: float = 7.0,
+        c_max: float = np.inf,
+        positions: Optional[np.ndarray] = None,
+    ) -> "WaypointGraph":
+        """The graph of dense ``D`` and ``C`` on the edges where the boolean ``keep`` is true.
+
+        Zero weights are raised to a tiny positive value so that sparse storage keeps the edge.
+        """
         rows, cols = np.nonzero(keep)
         n = D.shape[0]
         # store strictly positive values: a zero would vanish from the sparse structure
-        dvals = np.maximum(D[rows, cols], 1e-9)
-        cvals = np.maximum(C[rows, cols], 1e-12)
+        dvals = np.maximum(D[rows, cols], _MIN_DISTANCE)
+        cvals = np.maximum(C[rows, cols], _MIN_COST)
         dist = sparse.csr_matrix((dvals, (rows, cols)), shape=(n, n))
         cost = sparse.csr_matrix((cvals, (rows, cols)), shape=(n, n))
         return cls(dist, cost, observations, float(d_max), float(c_max), positions)
@@ -149,7 +186,7 @@ class WaypointGraph:
         d_max = self.d_max if d_max is None else d_max
         c_max = self.c_max if c_max is None else c_max
         src, dst, d, c = self.edge_arrays()
-        keep = (d < d_max) & (c < c_max)
+        keep = _short_and_cheap(d, c, d_max, c_max)
         n = self.n_nodes
         dist = sparse.csr_matrix((d[keep], (src[keep], dst[keep])), shape=(n, n))
         cost = sparse.csr_matrix((c[keep], (src[keep], dst[keep])), shape=(n, n))
@@ -190,11 +227,11 @@ class WaypointGraph:
         rows, cols, dv, cv = [], [], [], []
 
         def add(r, c, d, cc):
-            keep = (d < self.d_max) & (cc < self.c_max)
+            keep = _short_and_cheap(d, cc, self.d_max, self.c_max)
             rows.append(np.broadcast_to(r, d.shape)[keep])
             cols.append(np.broadcast_to(c, d.shape)[keep])
-            dv.append(np.maximum(d[keep], 1e-9))
-            cv.append(np.maximum(cc[keep], 1e-12))
+            dv.append(np.maximum(d[keep], _MIN_DISTANCE))
+            cv.append(np.maximum(cc[keep], _MIN_COST))
 
         add(start_ids[:, None], np.arange(n)[None, :], d_from, c_from)
         add(np.arange(n)[:, None], goal_ids[None, :], d_to, c_to)
@@ -270,4 +307,158 @@ class WaypointGraph:
             raise ValueError(f"cannot read waypoint graph {path}: {exc}") from exc
 
 
-__all__ = ["WaypointGraph"]
+# ---------------------------------------------------------------------- problem graphs
+@dataclass
+class ProblemGraph:
+    """The graph one planning problem is solved on: buffer nodes plus each agent's endpoints.
+
+    Node ids are ``0..N-1`` for the buffer nodes, ``N..N+K-1`` for the K starts and
+    ``N+K..N+2K-1`` for the K goals (in agent order).
+
+    Attributes:
+        observations: the node observations, ``(N + 2K, ...)``.
+        D, C: dense predicted distance and cost between every pair of nodes.
+        graph: the pruned graph (:class:`WaypointGraph`) the search runs on.
+        n_buffer: N, the number of buffer nodes.
+        c_max: the largest cost cut-off used (above the one asked for where it was relaxed).
+        connected: per agent, whether its goal is reachable from its start in ``graph``.
+    """
+
+    observations: np.ndarray
+    D: np.ndarray
+    C: np.ndarray
+    graph: WaypointGraph
+    n_buffer: int
+    c_max: float
+    connected: np.ndarray
+
+    @property
+    def n_agents(self) -> int:
+        return (len(self.observations) - self.n_buffer) // 2
+
+    @property
+    def start_ids(self) -> List[int]:
+        return list(range(self.n_buffer, self.n_buffer + self.n_agents))
+
+    @property
+    def goal_ids(self) -> List[int]:
+        k = self.n_agents
+        return list(range(self.n_buffer + k, self.n_buffer + 2 * k))
+
+
+def attach_endpoints(
+    observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
+    starts: np.ndarray, goals: np.ndarray,
+) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dense ``(D, C)`` over buffer nodes + starts + goals (``pairwise`` scores the new pairs), and
+    the observations in that order."""
+    n, m = len(observations), 2 * len(starts)
+    ends = np.concatenate([starts, goals])
+    d_ne, c_ne = pairwise(observations, ends)
+    d_en, c_en = pairwise(ends, observations)
+    d_ee, c_ee = pairwise(ends, ends)
+    D2 = np.empty((n + m, n + m))
+    C2 = np.empty((n + m, n + m))
+    D2[:n, :n], D2[:n, n:], D2[n:, :n], D2[n:, n:] = D, d_ne, d_en, d_ee
+    C2[:n, :n], C2[:n, n:], C2[n:, :n], C2[n:, n:] = C, c_ne, c_en, c_ee
+    return D2, C2, np.concatenate([observations, ends])
+
+
+def problem_edge_mask(D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float, c_max: float,
+                      endpoint_edges: int) -> np.ndarray:
+    """Edges of a problem graph (layout of :class:`ProblemGraph`) under cut-off ``c_max``.
+
+    The rule of :func:`edge_mask`, plus: a start is only left (towards buffer nodes and its own
+    goal), a goal only entered, and every start keeps its ``endpoint_edges`` cheapest short
+    outgoing edges (every goal its cheapest incoming ones) whatever ``c_max``, so that an agent
+    that starts or ends in a costly place is not cut off.
+    """
+    n = n_buffer
+    k = (D.shape[0] - n) // 2
+    keep = _short_and_cheap(D, C, d_max, c_max)
+    starts = np.arange(n, n + k)
+    goals = np.arange(n + k, n + 2 * k)
+    keep[:, starts] = False
+    keep[goals, :] = False
+    keep[starts[:, None], goals[None, :]] = False
+    keep[starts, goals] = _short_and_cheap(D[starts, goals], C[starts, goals], d_max, c_max)
+    e = min(endpoint_edges, n)
+    short = D[starts, :n] < d_max
+    cheap = np.argsort(np.where(short, C[starts, :n], np.inf), axis=1)[:, :e]
+    rows = np.repeat(starts, e)
+    keep[rows, cheap.ravel()] |= short[np.repeat(np.arange(k), e), cheap.ravel()]
+    short_in = D[:n, goals] < d_max
+    cheap_in = np.argsort(np.where(short_in, C[:n, goals], np.inf), axis=0)[:e, :]
+    cols = np.tile(goals, e)
+    keep[cheap_in.ravel(), cols] |= short_in[cheap_in.ravel(), np.tile(np.arange(k), e)]
+    np.fill_diagonal(keep, False)
+    return keep
+
+
+def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
+                       c_max: float, exclude: Optional[np.ndarray] = None,
+                       relax: bool = True) -> Tuple[np.ndarray, float]:
+    """Relax the cost cut-off around agents without a path until every goal is reachable (edits ``keep``).
+
+    For an agent without a path, the edges leaving the region its start reaches (and the edges
+    entering the region that reaches its goal) are admitted up to twice the cut-off, then four
+    times, ...; the rest of the graph keeps ``c_max``. ``exclude`` lists buffer nodes that
+    never gain an edge. Returns ``(connected, c)``: which agents have a path, and the largest
+    cut-off used (``c_max`` itself when nothing was relaxed, or when ``relax`` is false).
+    """
+    n = n_buffer
+    k = (D.shape[0] - n) // 2
+    s_ids = np.arange(n, n + k)
+    g_ids = np.arange(n + k, n + 2 * k)
+    c = float(c_max)
+    short = D < d_max
+    np.fill_diagonal(short, False)
+    # endpoints never gain edges into a start or out of a goal
+    short[:, n:n + k] = False
+    short[n + k:, :] = False
+    short[n:n + k, n + k:] = False
+    short[s_ids, g_ids] = D[s_ids, g_ids] < d_max
+    if exclude is not None and len(exclude):
+        short[exclude, :] = False
+        short[:, exclude] = False
+    c_top = float(C[short].max()) if short.any() else 0.0
+    while True:
+        g = sparse.csr_matrix(keep)
+        fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
+        ok = fwd[np.arange(k), g_ids]
+        if ok.all() or not relax or not math.isfinite(c) or c > c_top:
+            return ok, c
+        c *= 2.0
+        bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
+        for i in np.flatnonzero(~ok):
+            keep[fwd[i][:, None] & short & (C < c)] = True
+            keep[short & (C < c) & bwd[i][None, :]] = True
+
+
+def build_problem_graph(
+    observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
+    starts: np.ndarray, goals: np.ndarray, *, d_max: float, c_max: float, endpoint_edges: int = 3,
+    relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
+) -> ProblemGraph:
+    """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
+
+    The one pipeline from critic matrices to the graph a problem is searched on:
+    :func:`attach_endpoints`, :func:`problem_edge_mask`, then (with ``relax_cost``)
+    :func:`relax_cost_locally`. ``exclude`` lists buffer nodes (``0..N-1``) the graph must not
+    use (e.g. a waypoint an agent failed to reach).
+    """
+    n = len(observations)
+    ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
+    if len(ex) and (ex.min() < 0 or ex.max() >= n):
+        raise ValueError(f"exclude must hold buffer node ids in [0, {n}), got {ex.tolist()}")
+    D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals)
+    keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
+    keep[ex, :] = False
+    keep[:, ex] = False
+    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost)
+    graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
+    return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
+
+
+__all__ = ["PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
+           "edge_mask", "problem_edge_mask", "relax_cost_locally"]

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import sparse
@@ -39,12 +39,9 @@ from scipy.sparse.csgraph import dijkstra
 
 from .cbs import CBSResult, solve_cbs
 from .controller import AgentPlan
+from .graph import PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf_instance import Proximity
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
-from .graph import WaypointGraph
-
-#: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
-PairwiseFn = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -64,6 +61,9 @@ class MultiAgentPlan:
         planning_time: seconds spent attaching endpoints, pruning and searching.
         cbs: the full CBS result (paths, statistics).
         message: why planning ended as it did.
+        predicted_cost: per agent, the predicted cost of its route (sum over its edges).
+        problem: the problem graph the plan was made on (node observations, dense ``D`` and
+            ``C``, the pruned graph), for execution, plots and inspection.
     """
 
     status: str
@@ -78,13 +78,24 @@ class MultiAgentPlan:
     cbs: Optional[CBSResult] = None
     message: str = ""
     predicted_cost: List[float] = field(default_factory=list)
+    problem: Optional[ProblemGraph] = field(default=None, repr=False)
 
     @property
     def solved(self) -> bool:
         return bool(self.nodes)
 
-    def agent_plans(self, node_observations: np.ndarray, goals: np.ndarray,
-                    names: Optional[Sequence[str]] = None, hold: str = "all") -> Dict[str, AgentPlan]:
+    @property
+    def observations(self) -> np.ndarray:
+        """Observations of the problem graph's nodes, indexed by node id."""
+        if self.problem is None:
+            raise ValueError(f"this plan has no problem graph (status {self.status!r})")
+        return self.problem.observations
+
+    def waypoint_observations(self, agent: int) -> np.ndarray:
+        """The observations agent ``agent`` visits in order (its start first, its goal excluded)."""
+        return self.observations[np.asarray(self.nodes[agent], dtype=np.int64)]
+
+    def agent_plans(self, names: Optional[Sequence[str]] = None, hold: str = "all") -> Dict[str, AgentPlan]:
         """Controller plans: waypoint observations (start node included) and departure times.
 
         ``hold`` says where an agent that is early must wait for its planned departure time:
@@ -94,20 +105,20 @@ class MultiAgentPlan:
         still, which costs where the cost field is not zero).
 
         Args:
-            node_observations: observations of the problem graph's nodes, indexed by node id
-                (see :attr:`BufferPlanner.last_observations`).
-            goals: the agents' goal observations, ``(K, ...)``.
-            names: agent names (default ``agent_0``, ...).
+            names: agent names (default ``agent_0``, ...), in the order of the planned agents.
+            hold: ``"all"`` or ``"waits"`` (above).
         """
         if not self.solved:
             raise ValueError(f"no plan to execute: planning ended with status {self.status!r} ({self.message})")
         k = len(self.nodes)
         names = list(names) if names is not None else [f"agent_{i}" for i in range(k)]
-        if len(names) != k or len(goals) != k:
-            raise ValueError(f"{k} planned agents but {len(names)} names and {len(goals)} goals")
+        if len(names) != k:
+            raise ValueError(f"{k} planned agents but {len(names)} names")
         if hold not in ("all", "waits"):
             raise ValueError(f"hold must be 'all' or 'waits', got {hold!r}")
-        obs = np.asarray(node_observations)
+        obs = self.observations
+        assert self.problem is not None  # checked by ``observations``
+        goals = obs[self.problem.goal_ids]
         out = {}
         for i in range(k):
             depart = list(self.depart_times[i])
@@ -233,12 +244,16 @@ class BufferPlanner:
             raise ValueError(f"fallback_suboptimality must be >= 1 or None, got {fallback_suboptimality!r}")
         self.fallback_suboptimality = fallback_suboptimality
         self.budget_labels = int(budget_labels)
-        #: node observations of the last problem graph (buffer nodes, starts, goals)
-        self.last_observations: Optional[np.ndarray] = None
-        #: the last problem's dense matrices and pruned graph (for plots and inspection)
-        self.last_D: Optional[np.ndarray] = None
-        self.last_C: Optional[np.ndarray] = None
-        self.last_graph: Optional[WaypointGraph] = None
+        self._buffer_graph: Optional[WaypointGraph] = None
+
+    @property
+    def buffer_graph(self) -> WaypointGraph:
+        """The buffer nodes' graph pruned at ``d_max`` only (no cost cut-off, no endpoints): the
+        graph SoRB searches and the evaluation measures problem difficulty on."""
+        if self._buffer_graph is None:
+            self._buffer_graph = WaypointGraph.from_matrices(self.D, self.C, d_max=self.d_max,
+                                                             observations=self.observations)
+        return self._buffer_graph
 
     @classmethod
     def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max", **kwargs) -> "BufferPlanner":
@@ -253,16 +268,16 @@ class BufferPlanner:
 
     def with_options(self, **kwargs) -> "BufferPlanner":
         """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
-        opts = dict(d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
-                    proximity_radius=self.proximity_radius, time_model=self.time_model,
-                    suboptimality=self.suboptimality, time_limit=self.time_limit, relax_cost=self.relax_cost,
-                    fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
+        opts: Dict[str, Any] = dict(
+            d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
+            proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
+            time_limit=self.time_limit, relax_cost=self.relax_cost,
+            fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
         opts.update(kwargs)
         return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **opts)
 
     # ------------------------------------------------------------------ problem graph
-    def problem_matrices(self, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Dense ``(D, C)`` over buffer nodes + starts + goals, and the observations in that order."""
+    def _check_endpoints(self, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         starts = np.asarray(starts, dtype=self.observations.dtype)
         goals = np.asarray(goals, dtype=self.observations.dtype)
         if starts.shape != goals.shape or starts.shape[1:] != self.observations.shape[1:]:
@@ -271,40 +286,17 @@ class BufferPlanner:
         for name, x in (("starts", starts), ("goals", goals)):
             if not np.isfinite(x).all():
                 raise ValueError(f"{name} contain NaN or infinite values")
-        ends = np.concatenate([starts, goals])
-        n, m = len(self.observations), len(ends)
-        d_ne, c_ne = self.pairwise(self.observations, ends)
-        d_en, c_en = self.pairwise(ends, self.observations)
-        d_ee, c_ee = self.pairwise(ends, ends)
-        D = np.empty((n + m, n + m))
-        C = np.empty((n + m, n + m))
-        D[:n, :n], D[:n, n:], D[n:, :n], D[n:, n:] = self.D, d_ne, d_en, d_ee
-        C[:n, :n], C[:n, n:], C[n:, :n], C[n:, n:] = self.C, c_ne, c_en, c_ee
-        return D, C, np.concatenate([self.observations, ends])
+        return starts, goals
 
-    def _edges(self, D: np.ndarray, C: np.ndarray, k: int, c_max: float) -> np.ndarray:
-        """Boolean edge mask of the problem graph for cost cut-off ``c_max``."""
-        n = len(self.observations)
-        keep = (D < self.d_max) & (C < c_max)
-        starts = np.arange(n, n + k)
-        goals = np.arange(n + k, n + 2 * k)
-        # endpoints: a start only leaves (to nodes and its own goal), a goal is only entered
-        keep[:, starts] = False
-        keep[goals, :] = False
-        keep[starts[:, None], goals[None, :]] = False
-        own = (D[starts, goals] < self.d_max) & (C[starts, goals] < c_max)
-        keep[starts, goals] = own
-        e = min(self.endpoint_edges, n)
-        short = D[starts, :n] < self.d_max
-        cheap = np.argsort(np.where(short, C[starts, :n], np.inf), axis=1)[:, :e]
-        rows = np.repeat(starts, e)
-        keep[rows, cheap.ravel()] |= short[np.repeat(np.arange(k), e), cheap.ravel()]
-        short_in = D[:n, goals] < self.d_max
-        cheap_in = np.argsort(np.where(short_in, C[:n, goals], np.inf), axis=0)[:e, :]
-        cols = np.tile(goals, e)
-        keep[cheap_in.ravel(), cols] |= short_in[cheap_in.ravel(), np.tile(np.arange(k), e)]
-        np.fill_diagonal(keep, False)
-        return keep
+    def problem_graph(self, starts: np.ndarray, goals: np.ndarray,
+                      exclude: Optional[Sequence[int]] = None) -> ProblemGraph:
+        """The graph a problem is searched on: buffer nodes plus the agents' start and goal
+        observations, pruned with this planner's cut-offs (see
+        :func:`~agents.search.graph.build_problem_graph`)."""
+        starts, goals = self._check_endpoints(starts, goals)
+        return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
+                                   d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
+                                   relax_cost=self.relax_cost, exclude=exclude)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None) -> MultiAgentPlan:
@@ -320,33 +312,21 @@ class BufferPlanner:
         a waypoint an agent failed to reach when it replans.
         """
         t0 = time.perf_counter()
-        n_buf = len(self.observations)
-        ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
-        if len(ex) and (ex.min() < 0 or ex.max() >= n_buf):
-            raise ValueError(f"exclude must hold buffer node ids in [0, {n_buf}), got {ex.tolist()}")
-        D, C, obs = self.problem_matrices(starts, goals)
-        k = len(starts)
-        n = len(self.observations)
-        s_ids = list(range(n, n + k))
-        g_ids = list(range(n + k, n + 2 * k))
-        self.last_observations, self.last_D, self.last_C = obs, D, C
-        keep = self._edges(D, C, k, self.c_max)
-        keep[ex, :] = False
-        keep[:, ex] = False
-        ok, c_max = self._connect(keep, D, C, s_ids, g_ids, ex)
-        rows, cols = np.nonzero(keep)
-        dist = sparse.csr_matrix((np.maximum(D[rows, cols], 1e-9), (rows, cols)), shape=D.shape)
-        costm = sparse.csr_matrix((np.maximum(C[rows, cols], 1e-12), (rows, cols)), shape=D.shape)
-        graph = WaypointGraph(dist, costm, obs, self.d_max, c_max)
-        self.last_graph = graph
-        if not ok.all():
-            bad = [int(i) for i in np.flatnonzero(~ok)]
-            return MultiAgentPlan("infeasible", c_max=c_max, planning_time=time.perf_counter() - t0,
+        problem = self.problem_graph(starts, goals, exclude)
+        k = problem.n_agents
+        s_ids, g_ids = problem.start_ids, problem.goal_ids
+        D, C, c_max, graph = problem.D, problem.C, problem.c_max, problem.graph
+        if not problem.connected.all():
+            bad = [int(i) for i in np.flatnonzero(~problem.connected)]
+            return MultiAgentPlan("infeasible", c_max=c_max, planning_time=time.perf_counter() - t0, problem=problem,
                                   message=f"agents {bad} have no path from start to goal in the pruned graph")
         if budget is not None:
             graph = self._budget_subgraph(graph, s_ids, g_ids, float(budget))
         durations = graph.distance.copy()
-        durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0) if self.time_model == "durative" else np.ones_like(durations.data)
+        if self.time_model == "durative":  # an edge takes ceil(D) steps
+            durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0)
+        else:
+            durations.data = np.ones_like(durations.data)
         if k == 1:  # one agent has nobody to conflict with: CBS's answer is the shortest timed path
             res = self._single_agent_path(durations, s_ids[0], g_ids[0])
         else:
@@ -358,8 +338,8 @@ class BufferPlanner:
             res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
                             suboptimality=fb, time_limit=self.time_limit)
         out = MultiAgentPlan(res.status, soc=res.soc, makespan=res.makespan, c_max=c_max, cbs=res,
-                             message=res.message)
-        if res.solved:
+                             message=res.message, problem=problem)
+        if res.solved and res.paths is not None:
             out.nodes, out.depart_times, out.node_arrivals, out.arrival_times = waypoints_from_paths(res.paths)
             out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
         out.planning_time = time.perf_counter() - t0
@@ -389,42 +369,6 @@ class BufferPlanner:
             P[lo:lo + k, lo:lo + k] = np.inf
         return P
 
-    def _connect(self, keep: np.ndarray, D: np.ndarray, C: np.ndarray, s_ids, g_ids, exclude: Optional[np.ndarray] = None):
-        """Relax the cost cut-off locally until every agent's goal is reachable (edits ``keep``).
-
-        For an agent without a path, the edges leaving the region its start reaches (and the
-        edges entering the region that reaches its goal) are admitted up to twice the cut-off,
-        then four times, ...; the rest of the graph keeps ``c_max``. Returns ``(ok, c)``:
-        which agents have a path, and the largest cut-off used.
-        """
-        k = len(s_ids)
-        c = self.c_max
-        short = D < self.d_max
-        np.fill_diagonal(short, False)
-        n = len(self.observations)
-        # endpoints never gain edges into a start or out of a goal
-        short[:, n:n + k] = False
-        short[n + k:, :] = False
-        short[n:n + k, n + k:] = False
-        short[s_ids, g_ids] = D[s_ids, g_ids] < self.d_max
-        if exclude is not None and len(exclude):
-            short[exclude, :] = False
-            short[:, exclude] = False
-        c_top = float(C[short].max()) if short.any() else 0.0
-        while True:
-            g = sparse.csr_matrix(keep)
-            fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
-            ok = fwd[np.arange(k), g_ids]
-            if ok.all() or not self.relax_cost or not math.isfinite(c) or c > c_top:
-                return ok, c
-            c *= 2.0
-            bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
-            for i in np.flatnonzero(~ok):
-                near_s = fwd[i]
-                near_g = bwd[i]
-                keep[near_s[:, None] & short & (C < c)] = True
-                keep[short & (C < c) & near_g[None, :]] = True
-
     @staticmethod
     def _route_cost(C: np.ndarray, nodes: List[int]) -> float:
         a, b = np.array(nodes[:-1], dtype=np.int64), np.array(nodes[1:], dtype=np.int64)
@@ -452,4 +396,4 @@ class BufferPlanner:
         return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max)
 
 
-__all__ = ["BufferPlanner", "MultiAgentPlan", "direct_plans", "waypoints_from_paths"]
+__all__ = ["BufferPlanner", "MultiAgentPlan", "PairwiseFn", "direct_plans", "waypoints_from_paths"]

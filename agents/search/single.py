@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -205,7 +205,9 @@ def lagrangian_risk_path(
         return Plan([], np.inf, np.inf, "infeasible",
                     {"reason": f"cheapest path costs {safe.cost:.3f} > budget {budget:g}"})
     lower = fast.distance
-    for it in range(max_iter):
+    iterations = 0
+    while iterations < max_iter:
+        iterations += 1
         if fast.cost - safe.cost <= 1e-12:
             break
         lam = (safe.distance - fast.distance) / (fast.cost - safe.cost)
@@ -219,7 +221,7 @@ def lagrangian_risk_path(
         else:
             fast = r
     return Plan(safe.nodes, safe.distance, safe.cost, "feasible",
-                {"iterations": it + 1, "gap": safe.distance - lower})
+                {"iterations": iterations, "gap": safe.distance - lower})
 
 
 __all__ = ["Plan", "lagrangian_risk_path", "risk_bounded_path", "shortest_path"]

@@ -88,8 +88,15 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from baselines.evaluation import (VALIDATION_SEED_OFFSET, EvaluationSetup, aggregate, evaluate, markdown_table,
-                                      select_c_max, write_csv)
+    from baselines.evaluation import (
+        VALIDATION_SEED_OFFSET,
+        EvaluationSetup,
+        aggregate,
+        evaluate,
+        markdown_table,
+        select_c_max,
+        write_csv,
+    )
     from baselines.methods import get_methods
 
     if args.c_max == "auto" and args.validation_seed == args.seed:

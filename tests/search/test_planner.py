@@ -55,15 +55,15 @@ def test_two_agents_swap_plan_is_valid_and_timed():
     plan = planner.plan(starts, goals)
     assert plan.status == "optimal"
     res = plan.cbs
-    dur = planner.last_graph.distance.copy()
+    dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
     n = len(pts)
-    prox = Proximity(planner.last_D, planner.proximity_radius)
+    prox = Proximity(plan.problem.D, planner.proximity_radius)
     assert validate(dur, [n, n + 1], [n + 2, n + 3], res.paths, time_model="durative", proximity=prox) == []
     # both agents cross the grid: each arrival is at least the straight-line length in steps
     assert min(plan.arrival_times) >= 5
     # the controller plans start at the start observation and carry the departure times
-    plans = plan.agent_plans(planner.last_observations, goals)
+    plans = plan.agent_plans()
     assert set(plans) == {"agent_0", "agent_1"}
     p0 = plans["agent_0"]
     assert isinstance(p0, AgentPlan)
@@ -84,7 +84,7 @@ def test_cost_cutoff_routes_around_a_costly_region():
     assert safe.predicted_cost[0] == pytest.approx(0.0, abs=1e-6)
     assert safe.arrival_times[0] > plain.arrival_times[0]  # the detour is longer
     # no visited node lies inside the costly disc
-    visited = safe_planner.last_observations[safe.nodes[0]]
+    visited = safe.waypoint_observations(0)
     assert (np.linalg.norm(visited - [4.0, 4.0], axis=1) >= 2.5).all()
 
 
@@ -98,7 +98,7 @@ def test_cost_cutoff_is_relaxed_until_every_agent_has_a_path():
     assert strict.status == "infeasible" and not strict.solved
     assert "no path" in strict.message
     with pytest.raises(ValueError, match="infeasible"):
-        strict.agent_plans(np.zeros((1, 2)), goal)
+        strict.agent_plans()
 
 
 def test_risk_budget_bounds_the_route_cost():
@@ -145,7 +145,7 @@ def test_agents_starting_side_by_side_can_be_planned():
     assert plan.solved, plan.message
     # on the way, the agents never come closer than the radius
     seq = plan.cbs.node_sequences(pad=True)
-    D = planner.last_D
+    D = plan.problem.D
     n = len(pts)
     for t in range(1, min(len(seq[0]), len(seq[1])) - 1):
         u, v = seq[0][t], seq[1][t]
@@ -182,7 +182,7 @@ def test_a_single_agent_gets_the_path_cbs_would_give(time_model):
     start, goal = np.array([[0.0, 0.0]]), np.array([[5.0, 5.0]])
     plan = planner.plan(start, goal)
     assert plan.status == "optimal" and plan.cbs.message.startswith("a single agent")
-    dur = planner.last_graph.distance.copy()
+    dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0) if time_model == "durative" else np.ones_like(dur.data)
     n = len(pts)
     from agents.search.cbs import solve_cbs

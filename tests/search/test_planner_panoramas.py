@@ -72,13 +72,13 @@ def test_panorama_nodes_plan_valid_waypoints_for_several_agents(world):
     plan = planner.plan(starts, goals)
     assert plan.solved, plan.message
     assert plan.status in ("optimal", "suboptimal")
-    dur = planner.last_graph.distance.copy()
+    dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
     n = len(nodes)
-    prox = Proximity(planner.last_D, planner.proximity_radius)
+    prox = Proximity(plan.problem.D, planner.proximity_radius)
     assert validate(dur, [n, n + 1, n + 2], [n + 3, n + 4, n + 5], plan.cbs.paths, time_model="durative",
                     proximity=prox) == []
-    plans = plan.agent_plans(planner.last_observations, goals)
+    plans = plan.agent_plans()
     assert len(plans) == 3
     node_bytes = {n.tobytes() for n in nodes}
     for name, ap in plans.items():

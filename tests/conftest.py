@@ -1,4 +1,4 @@
-"""A stand-in goal-conditioned agent for fast evaluation tests (no torch, no checkpoint).
+"""Shared test helpers: a stand-in goal-conditioned agent for fast tests (no torch, no checkpoint).
 
 Observations of the vector envs are positions divided by the world size; the stand-in's
 "critics" are exact: distance = straight-line length in units (at least one step), cost = the

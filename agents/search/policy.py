@@ -1,0 +1,389 @@
+"""Search on the replay buffer as one policy object: plan with CBS, then follow the waypoints.
+
+:class:`SearchPolicy` puts together what the paper's method is made of: a graph of buffer
+observations annotated by a critic (:class:`~agents.search.planner.BufferPlanner`), CBS, and a
+goal-conditioned policy that drives every agent from waypoint to waypoint
+(:class:`~agents.search.controller.WaypointController`). It is used like a Stable-Baselines3
+model::
+
+    policy = SearchPolicy.from_models(critic, driver, c_max=0.25)
+    obs, infos = env.reset(seed=0)                # a PettingZoo parallel env ...
+    while env.agents:
+        actions, _ = policy.predict({a: obs[a] for a in env.agents})
+        obs, rewards, terminations, truncations, infos = env.step(actions)
+
+and just as well on a single Gymnasium goal-conditioned observation (``obs, info =
+env.reset()``; ``action, _ = policy.predict(obs)``). The first call of an episode plans for
+every agent it is given (starts: their ``"observation"``, goals: their ``"desired_goal"``).
+A new episode is recognised by :meth:`SearchPolicy.reset`, by ``episode_start``, by a changed
+goal or by an agent that was not there on the previous call; call :meth:`reset` when an episode
+repeats the previous one's problem exactly.
+
+Only observations enter: positions never do. This module does not import torch; the models
+are only called through ``predict``, ``distance`` and ``pairwise``.
+"""
+from __future__ import annotations
+
+import inspect
+import time
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from .controller import AgentPlan, ControllerStats, WaypointController
+from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+
+#: ``policy(obs[B, ...], goal[B, ...]) -> actions[B, 2]``
+PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+#: ``distance(obs[B, ...], goal[B, ...]) -> [B]``
+DistanceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def policy_fn(model: Any, deterministic: bool = True) -> PolicyFn:
+    """``policy(obs[B], goal[B]) -> actions[B, 2]`` from a goal-conditioned SB3 model."""
+
+    def act(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        batch = {"observation": obs, "achieved_goal": obs, "desired_goal": goals}
+        return model.predict(batch, deterministic=deterministic)[0]
+
+    return act
+
+
+def distance_fn(model: Any, aggregate: str = "max") -> DistanceFn:
+    """``distance(obs[B], goal[B]) -> [B]`` predicted steps (pessimistic ensemble by default)."""
+
+    def dist(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return model.distance(obs, goals, aggregate=aggregate)
+
+    return dist
+
+
+def buffer_observations(replay_buffer: Any, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` distinct observations drawn from an SB3 (dict) replay buffer's stored transitions."""
+    stored = replay_buffer.observations
+    obs = stored["observation"] if isinstance(stored, Mapping) else stored
+    size = replay_buffer.buffer_size if getattr(replay_buffer, "full", False) else replay_buffer.pos
+    flat = np.asarray(obs[:size]).reshape(-1, *np.shape(obs)[2:])
+    if len(flat) < n:
+        raise ValueError(f"the replay buffer holds {len(flat)} observations, fewer than the {n} graph nodes asked for")
+    return flat[np.sort(rng.choice(len(flat), size=n, replace=False))]
+
+
+def env_observations(env_id: str, n: int, seed: int = 0) -> np.ndarray:
+    """Observations at ``n`` random free states of the registered env ``env_id`` (seeded)."""
+    import gymnasium as gym
+
+    import safe_mapf_envs  # noqa: F401  (registers the ids)
+
+    env = gym.make(env_id)
+    try:
+        u: Any = env.unwrapped
+        states = u.sample_states(n, np.random.default_rng(seed))
+        return np.asarray(u.observations_at(states))
+    finally:
+        env.close()
+
+
+class SearchPolicy:
+    """Search on the replay buffer with CBS, driven by a goal-conditioned policy (``predict``).
+
+    Args:
+        planner: the buffer graph and its critic (see :meth:`from_models`); ``None`` drives
+            every agent straight to its goal with the same controller rules (the plain
+            policy).
+        policy_model: the goal-conditioned model that drives the agents (``predict``); its
+            critic (``distance``) decides when a waypoint is reached, unless ``distance_model``
+            is given.
+        distance_model: optional model whose ``distance`` replaces the driver's.
+        budget: optional bound on each agent's total predicted route cost
+            (:meth:`BufferPlanner.plan`).
+        hold: where an agent that is early waits for its planned departure time: ``"waits"``
+            (only where CBS made it wait) or ``"all"`` waypoints.
+        reach_threshold: a waypoint is reached at a predicted distance below this (steps).
+        safety_radius: agents closer than this (predicted steps) yield to each other.
+        replan_when_stuck: an agent stuck twice on the way to one waypoint gets a new
+            single-agent plan from where it stands, on the same graph without that waypoint
+            and the nodes within ``ban_radius`` predicted steps of it (a buffer graph has many
+            nodes at almost the same place, and a critic that misjudged one edge misjudges their
+            edges too); if there is none, it gives the waypoint up.
+        ban_radius: see ``replan_when_stuck``.
+        seed: seed of the controller's escape actions (each episode starts from it).
+        deterministic: drive with the deterministic policy (default).
+        controller_kwargs: more options of :class:`WaypointController` (``stuck_window``,
+            ``escape_steps``, ...).
+    """
+
+    def __init__(
+        self,
+        planner: Optional[BufferPlanner],
+        policy_model: Any,
+        distance_model: Any = None,
+        *,
+        budget: Optional[float] = None,
+        hold: str = "waits",
+        reach_threshold: float = 2.0,
+        safety_radius: Optional[float] = 2.0,
+        replan_when_stuck: bool = True,
+        ban_radius: float = 3.0,
+        seed: Optional[int] = 0,
+        deterministic: bool = True,
+        controller_kwargs: Optional[Dict[str, Any]] = None,
+    ) -> None:
+        if hold not in ("all", "waits"):
+            raise ValueError(f"hold must be 'all' or 'waits', got {hold!r}")
+        if not reach_threshold > 0:
+            raise ValueError(f"reach_threshold must be > 0, got {reach_threshold!r}")
+        if budget is not None and not budget > 0:
+            raise ValueError(f"budget must be > 0 or None, got {budget!r}")
+        if not hasattr(policy_model, "predict"):
+            raise TypeError(f"the driving model needs a predict() method, got {type(policy_model).__name__}")
+        if not hasattr(distance_model if distance_model is not None else policy_model, "distance"):
+            raise TypeError("the model that judges waypoints reached needs a distance() method")
+        self.planner = planner
+        self.policy_model = policy_model
+        self.distance_model = distance_model if distance_model is not None else policy_model
+        self.budget = budget
+        self.hold = hold
+        self.reach_threshold = float(reach_threshold)
+        self.safety_radius = safety_radius
+        self.replan_when_stuck = bool(replan_when_stuck)
+        self.ban_radius = float(ban_radius)
+        self.seed = seed
+        self.deterministic = bool(deterministic)
+        self.controller_kwargs = dict(controller_kwargs or {})
+        self._policy = policy_fn(policy_model, deterministic=self.deterministic)
+        self._distance = distance_fn(self.distance_model)
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_models(
+        cls,
+        critic: Any,
+        driver: Any = None,
+        nodes: Union[np.ndarray, Any, None] = None,
+        *,
+        n_nodes: int = 1000,
+        seed: int = 0,
+        aggregate: str = "max",
+        **options: Any,
+    ) -> "SearchPolicy":
+        """Build the graph with ``critic`` and drive with ``driver`` (default: the critic).
+
+        Args:
+            critic: the model whose ``pairwise`` distances and costs annotate the graph (the
+                paper: the unconstrained agent).
+            driver: the model that drives the agents (the paper: the constrained agent).
+            nodes: the graph's node observations ``(N, ...)``, or a replay buffer to draw
+                ``n_nodes`` of them from; ``None`` draws ``n_nodes`` random free states of the
+                critic's environment (``critic.env_id``) and renders their observations.
+            n_nodes: graph size when ``nodes`` is a replay buffer or ``None``.
+            seed: seed of the node draw (and of the controller, unless ``options`` has one).
+            aggregate: ensemble aggregation of the critic (``"max"``: pessimistic).
+            options: :class:`BufferPlanner` options (``d_max``, ``c_max``,
+                ``proximity_radius``, ``suboptimality``, ``time_limit``, ...) and
+                :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
+        """
+        planner_names = set(inspect.signature(BufferPlanner.__init__).parameters) - {"self", "observations", "D",
+                                                                                      "C", "pairwise"}
+        policy_names = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}
+        unknown = set(options) - planner_names - policy_names
+        if unknown:
+            raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner_names)}; "
+                            f"policy options: {sorted(policy_names)}")
+        if n_nodes < 2:
+            raise ValueError(f"n_nodes must be >= 2, got {n_nodes}")
+        if nodes is None:
+            env_id = getattr(critic, "env_id", None)
+            if not env_id:
+                raise ValueError("the critic does not know its environment (env_id): pass nodes= (observations "
+                                 "or a replay buffer)")
+            obs = env_observations(env_id, n_nodes, seed)
+        elif hasattr(nodes, "observations") and hasattr(nodes, "pos"):
+            obs = buffer_observations(nodes, n_nodes, np.random.default_rng(seed))
+        else:
+            obs = np.asarray(nodes)
+        planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate,
+                                           **{k: v for k, v in options.items() if k in planner_names})
+        kwargs = {k: v for k, v in options.items() if k in policy_names}
+        kwargs.setdefault("seed", seed)
+        return cls(planner, driver if driver is not None else critic, **kwargs)
+
+    # ------------------------------------------------------------------ episode state
+    def reset(self, seed: Optional[int] = None) -> None:
+        """Forget the current plan: the next :meth:`predict` plans anew (``seed`` replaces the
+        controller's seed from now on)."""
+        if seed is not None:
+            self.seed = seed
+        self.controller: Optional[WaypointController] = None
+        #: the plan of the current episode (``None`` before the first call, or without a planner)
+        self.current_plan: Optional[MultiAgentPlan] = None
+        #: agent names in planning order
+        self.agents: List[str] = []
+        #: per agent, the node ids of its current route (the planner's problem graph)
+        self.routes: Dict[str, List[int]] = {}
+        self._banned: Dict[str, List[int]] = {}
+        self._goals: Dict[str, np.ndarray] = {}
+        self._last_obs: Dict[str, np.ndarray] = {}
+        self._last_names: set = set()
+        #: seconds spent on the episode's first plan, and on the replans since
+        self.planning_time = 0.0
+        self.replan_time = 0.0
+
+    @property
+    def stats(self) -> ControllerStats:
+        """The controller's counters of the current episode (yields, waits, escapes, replans, ...)."""
+        return self.controller.stats if self.controller is not None else ControllerStats()
+
+    def waypoints(self, agent: str) -> np.ndarray:
+        """The waypoint observations ``agent`` currently follows (its start first)."""
+        if self.controller is None:
+            raise ValueError("no plan yet: call predict() first")
+        return self.controller.plans[agent].waypoints
+
+    # ------------------------------------------------------------------ acting
+    def predict(
+        self,
+        observation: Mapping[str, Any],
+        state: Any = None,
+        episode_start: Optional[Union[bool, np.ndarray]] = None,
+        deterministic: Optional[bool] = None,
+    ) -> Tuple[Any, None]:
+        """Actions for a goal-conditioned observation dict, or a dict agent -> observation dict.
+
+        Returns ``(action, None)`` like an SB3 model: an action array for a single Gymnasium
+        observation, a dict agent -> action for a PettingZoo parallel env's observations (pass
+        the live agents', ``{a: obs[a] for a in env.agents}``: an agent that has just arrived
+        still has an observation but needs no action). ``state`` is ignored; a true
+        ``episode_start`` starts a new episode. ``deterministic`` must agree with the one the
+        policy was made with, if given.
+        """
+        if deterministic is not None and bool(deterministic) != self.deterministic:
+            raise ValueError(f"this SearchPolicy drives with deterministic={self.deterministic}; "
+                             "make another one to change it")
+        single = isinstance(observation, Mapping) and "desired_goal" in observation
+        obs_by_agent: Mapping[str, Any] = {"agent_0": observation} if single else observation
+        if not isinstance(obs_by_agent, Mapping) or not obs_by_agent:
+            raise TypeError("predict() takes a goal-conditioned observation dict (observation, achieved_goal, "
+                            "desired_goal) or a non-empty dict from agent name to such a dict, got "
+                            f"{type(observation).__name__}")
+        current, goals = {}, {}
+        for a, o in obs_by_agent.items():
+            if not isinstance(o, Mapping) or "observation" not in o or "desired_goal" not in o:
+                raise TypeError(f"observation of {a!r} must be a dict with 'observation' and 'desired_goal'")
+            current[a] = self._one(np.asarray(o["observation"]), f"{a}: observation", single)
+            goals[a] = self._one(np.asarray(o["desired_goal"]), f"{a}: desired_goal", single)
+        if self._new_episode(current, goals, episode_start):
+            self._start(current, goals)
+        assert self.controller is not None
+        self._last_obs.update(current)
+        self._last_names = set(current)
+        actions = self.controller.act(current)
+        if single:
+            act = actions["agent_0"]
+            return (act[None] if np.ndim(observation["observation"]) > len(self._shape()) else act), None
+        return actions, None
+
+    def replan(self, agents: Optional[Sequence[str]] = None) -> MultiAgentPlan:
+        """Plan again for ``agents`` (default: every agent seen on the last call) from their last
+        observations, jointly with CBS; the others keep their plans. Returns the new plan (its
+        ``status`` says whether it was solved; unsolved, the agents keep their plans)."""
+        if self.controller is None or self.planner is None:
+            raise ValueError("nothing to replan: " + ("no planner" if self.planner is None else "call predict() first"))
+        names = list(agents) if agents is not None else [a for a in self.agents if a in self._last_names]
+        unknown = [a for a in names if a not in self._last_obs]
+        if unknown or not names:
+            raise ValueError(f"cannot replan {unknown or names}: agents seen are {sorted(self._last_obs)}")
+        t0 = time.perf_counter()
+        plan = self.planner.plan(np.stack([self._last_obs[a] for a in names]),
+                                 np.stack([self._goals[a] for a in names]), budget=self.budget)
+        if plan.solved:
+            t = self.controller.t
+            for i, (a, p) in enumerate(plan.agent_plans(names, hold=self.hold).items()):
+                shifted = None if p.depart_times is None else [d + t if d > 0 else 0 for d in p.depart_times]
+                self.controller.set_plan(a, AgentPlan(p.waypoints, p.goal, shifted, p.starts_at_first))
+                self.routes[a] = list(plan.nodes[i])
+                self._banned[a] = []
+        self.replan_time += time.perf_counter() - t0
+        return plan
+
+    # ------------------------------------------------------------------ internals
+    def _shape(self) -> Tuple[int, ...]:
+        if self.planner is not None:
+            return tuple(self.planner.observations.shape[1:])
+        return tuple(next(iter(self._goals.values())).shape) if self._goals else ()
+
+    def _one(self, x: np.ndarray, what: str, single: bool) -> np.ndarray:
+        """One agent's observation, checked against the graph's observation shape."""
+        shape = self._shape()
+        if shape and x.shape != shape:
+            if single and x.shape == (1, *shape):  # a VecEnv with one environment
+                return x[0]
+            raise ValueError(f"{what} has shape {x.shape}, the graph's observations have shape {shape}"
+                             + (" (SearchPolicy drives one environment, not a batch)" if x.shape[1:] == shape else ""))
+        if x.dtype.kind == "f" and not np.isfinite(x).all():
+            raise ValueError(f"{what} contains NaN or infinite values")
+        return x
+
+    def _new_episode(self, current: Dict[str, np.ndarray], goals: Dict[str, np.ndarray],
+                     episode_start: Optional[Union[bool, np.ndarray]]) -> bool:
+        if self.controller is None:
+            return True
+        if episode_start is not None and bool(np.any(episode_start)):
+            return True
+        if any(a not in self._goals for a in current) or not set(current) <= self._last_names:
+            return True
+        return any(not np.array_equal(goals[a], self._goals[a]) for a in current)
+
+    def _start(self, current: Dict[str, np.ndarray], goals: Dict[str, np.ndarray]) -> None:
+        """Plan for every agent given and set up the controller."""
+        self.reset()
+        t0 = time.perf_counter()
+        names = list(current)
+        starts = np.stack([current[a] for a in names])
+        goal_arr = np.stack([goals[a] for a in names])
+        plans: Dict[str, AgentPlan]
+        if self.planner is None:
+            plans = direct_plans(goal_arr, names)
+        else:
+            plan = self.planner.plan(starts, goal_arr, budget=self.budget)
+            self.current_plan = plan
+            plans = plan.agent_plans(names, hold=self.hold) if plan.solved else direct_plans(goal_arr, names)
+            self.routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else []
+                           for i, a in enumerate(names)}
+            self._banned = {a: [] for a in names}
+        self.planning_time = time.perf_counter() - t0
+        self.agents = names
+        self._goals = dict(goals)
+        replan = self._replan_stuck if self.planner is not None and self.replan_when_stuck else None
+        self.controller = WaypointController(self._policy, self._distance, plans,
+                                             reach_threshold=self.reach_threshold, safety_radius=self.safety_radius,
+                                             seed=self.seed, replan=replan, **self.controller_kwargs)
+
+    def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
+        """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
+        assert self.planner is not None and self.controller is not None
+        t1 = time.perf_counter()
+        p = self.planner
+        n_nodes = len(p.observations)
+        k = self.controller.index[agent]
+        route = self.routes[agent]
+        # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
+        # nodes right by it
+        f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
+        if f < n_nodes:
+            near = np.minimum(p.D[f], p.D[:, f]) < self.ban_radius
+            self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
+        sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=self._banned[agent])
+        if sub.solved:
+            new = sub.agent_plans([agent], hold="waits")[agent]
+            self.routes[agent] = list(sub.nodes[0])
+        else:  # no other way on the graph: give the waypoint up
+            new = AgentPlan(current.waypoints[k + 1:], current.goal)
+            self.routes[agent] = route[k + 1:]
+        self.replan_time += time.perf_counter() - t1
+        return new
+
+
+__all__ = ["DistanceFn", "PolicyFn", "SearchPolicy", "buffer_observations", "distance_fn", "env_observations",
+           "policy_fn"]
