@@ -12,6 +12,10 @@ import importlib
 import sys
 from typing import Sequence
 
+
+class MissingExtraError(ImportError):
+    """An optional dependency a flag needs (e.g. Ray for ``--ray``) is not installed."""
+
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "baselines.commands.envs",
@@ -47,7 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, MissingExtraError) as exc:
         print(f"safe-mapf {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

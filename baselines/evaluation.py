@@ -194,6 +194,19 @@ def _methods_for(methods: Sequence[Method], k: int, policy_agents: Optional[Sequ
     return out
 
 
+def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed: int):
+    """Run ``method`` on ``problem`` in ``env`` (seeded with ``seed``); returns ``(row, execution)``."""
+    ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed)
+    row = {
+        "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty,
+        "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
+        "cost_mean": float(ex.cost.mean()), "collisions": ex.collisions, "steps": ex.steps,
+        "planning_time": ex.planning_time, "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
+        "c_max": method.c_max if method.search else math.inf,
+    }
+    return row, ex
+
+
 def evaluate(
     setup: EvaluationSetup,
     methods: Sequence[Method],
@@ -207,6 +220,7 @@ def evaluate(
     policy_agents: Optional[Sequence[int]] = None,
     c_max_by_agents: Optional[Dict[int, float]] = None,
     desc: str = "evaluate",
+    ray: Optional[str] = None,
 ) -> List[Dict[str, Any]]:
     """Run every method on the same problems; one row per (method, agents, difficulty, problem).
 
@@ -214,39 +228,62 @@ def evaluate(
     Table II runs them on single agents only); ``c_max_by_agents`` sets the cost cut-off of the
     constrained searches per agent count (e.g. chosen by :func:`select_c_max`). Rows carry the
     ``c_max`` a method used (``inf`` for distance pruning only). ``on_run(row, problem,
-    execution)`` is called after each run (e.g. to keep trajectories).
+    execution)`` is called after each run, in the order of the rows (e.g. to keep trajectories).
+
+    ``ray`` runs the runs as Ray tasks (see :mod:`baselines.distributed`): ``"local"`` on this
+    machine's cores, ``"auto"`` on the cluster this machine belongs to, or a cluster address.
+    The rows are those of the serial evaluation, in the same order (timing fields aside).
     """
     import safe_mapf_envs
 
+    if ray is not None:
+        from .distributed import require_ray
+
+        require_ray()  # fail before any work if Ray is missing
     cells = [(k, d) for k in agent_counts for d in difficulties]
-    total = sum(len(_methods_for(methods, k, policy_agents, c_max_by_agents)) for k, _ in cells) * n_problems
+    tasks = []
+    for k, d in cells:
+        problems = make_problems(setup, d, k, n_problems, seed=seed)
+        tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=total, desc=desc, unit="run", mininterval=2.0)
+        bar = tqdm(total=len(tasks), desc=desc, unit="run", mininterval=2.0)
     rows: List[Dict[str, Any]] = []
-    for k, d in cells:
-        problems = make_problems(setup, d, k, n_problems, seed=seed)
-        env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=k, max_cycles=max_cycles)
-        for m in _methods_for(methods, k, policy_agents, c_max_by_agents):
-            for prob in problems:
-                ex = execute(env, m, setup.models, setup.planner, prob.starts, prob.goals,
-                             seed=seed + prob.index)
-                row = {
-                    "method": m.name, "agents": k, "difficulty": d, "problem": prob.index,
-                    "success": ex.success, "cost_max": float(ex.cost.max()), "cost_mean": float(ex.cost.mean()),
-                    "collisions": ex.collisions, "steps": ex.steps, "planning_time": ex.planning_time,
-                    "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
-                    "c_max": m.c_max if m.search else math.inf,
-                }
-                rows.append(row)
-                if on_run is not None:
-                    on_run(row, prob, ex)
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix_str(f"{m.name} N={k} {d}")
-        env.close()
+
+    def done(row, prob, ex) -> None:
+        rows.append(row)
+        if on_run is not None:
+            on_run(row, prob, ex)
+
+    if ray is None:
+        env, cell = None, None
+        for m, prob in tasks:
+            if cell != (prob.n_agents, prob.difficulty) or env is None:  # one env per cell
+                if env is not None:
+                    env.close()
+                env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=prob.n_agents, max_cycles=max_cycles)
+                cell = (prob.n_agents, prob.difficulty)
+            row, ex = run_row(setup, env, m, prob, seed + prob.index)
+            done(row, prob, ex)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix_str(f"{m.name} N={prob.n_agents} {prob.difficulty}")
+        if env is not None:
+            env.close()
+    else:
+        from .distributed import run_on_ray
+
+        pending: Dict[int, Any] = {}
+        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, address=ray):
+            pending[i] = (row, ex)
+            while len(rows) in pending:  # hand rows on in order
+                j = len(rows)
+                row_j, ex_j = pending.pop(j)
+                done(row_j, tasks[j][1], ex_j)
+            if bar is not None:
+                bar.update(1)
     if bar is not None:
         bar.close()
     return rows
@@ -301,6 +338,7 @@ def select_c_max(
     success_slack: float = 0.05,
     max_cycles: int = 300,
     progress: bool = True,
+    ray: Optional[str] = None,
 ) -> CMaxSelection:
     """Choose the cost cut-off of a constrained search per agent count on validation problems.
 
@@ -310,6 +348,7 @@ def select_c_max(
     another seed gives other problems). Per agent count, among the candidates whose success
     rate is within ``success_slack`` of the best one, the one with the lowest mean largest
     cumulative cost over its successful runs wins (ties: the larger cut-off, the denser graph).
+    ``ray`` runs the validation runs on Ray (see :func:`evaluate`).
     """
     if not method.search or not math.isfinite(method.c_max):
         raise ValueError(f"method {method.name!r} has no cost cut-off to choose")
@@ -322,7 +361,7 @@ def select_c_max(
     rows: List[Dict[str, Any]] = []
     for c in grid:
         rows += evaluate(setup, [method.with_options(c_max=c)], agent_counts, difficulties, n_problems, seed=seed,
-                         max_cycles=max_cycles, progress=progress, desc=f"validate c_max={c:g}")
+                         max_cycles=max_cycles, progress=progress, desc=f"validate c_max={c:g}", ray=ray)
     table, chosen = [], {}
     for k in agent_counts:
         stats = []

@@ -45,6 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also draw the trajectory figure (default on)")
     p.add_argument("--json", action="store_true", help="print the aggregate rows as JSON instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="run the runs as Ray tasks: alone, on a local Ray with this machine's cores; 'auto' joins "
+                        "the running cluster (ray start --head); or a cluster address. Same rows as the serial "
+                        "run for the same seed. Needs the ray extra: pip install \"safe-mapf[ray]\"")
     p.set_defaults(func=run)
 
 
@@ -102,6 +106,10 @@ def run(args: argparse.Namespace) -> int:
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
                          "test problems")
+    if args.ray is not None:
+        from baselines.distributed import require_ray
+
+        require_ray()  # before any work
     torch.set_num_threads(1)
     methods = get_methods(dict.fromkeys(args.methods))
     opts = {}
@@ -126,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
         sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
                            n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
-                           max_cycles=args.max_cycles, progress=progress)
+                           max_cycles=args.max_cycles, progress=progress, ray=args.ray)
         chosen = sel.chosen
         write_csv(sel.rows, out / "validation_runs.csv")
         (out / "c_max.json").write_text(json.dumps(
@@ -135,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
              "table": sel.table}, indent=1))
     rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                     max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                    c_max_by_agents=chosen)
+                    c_max_by_agents=chosen, ray=args.ray)
     agg = aggregate(rows)
     write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
