@@ -5,8 +5,15 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from baselines.evaluation import (EvaluationSetup, aggregate, c_max_grid, evaluate, make_problems, markdown_table,
-                                 write_csv)
+from baselines.evaluation import (
+    EvaluationSetup,
+    aggregate,
+    c_max_grid,
+    evaluate,
+    make_problems,
+    markdown_table,
+    write_csv,
+)
 from baselines.methods import METHODS, execute, get_methods
 
 
