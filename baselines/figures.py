@@ -1,14 +1,15 @@
-"""The Figure 1 analogue: each method's trajectories over the cost heat map.
+"""The Figure 1 analogue, and executions as animations.
 
-:func:`trajectory_figure` runs every method on one single-agent and one multi-agent problem
-(the same problems for all methods) and draws, per method, the executed trajectories, the
-planned waypoints, starts (circles) and goals (stars) over the map's cost field, with each
-run's largest cumulative cost in the panel title.
+:func:`trajectory_figure` runs every method on the same problems (one row per agent count)
+and draws, per method, the executed trajectories, the planned waypoints, starts (circles) and
+goals (stars) over the map's cost field, with each run's largest cumulative cost in the panel
+title. :func:`run_animation` writes a GIF of one multi-agent execution: top-down over the cost
+field, with trails, planned waypoints and goals.
 """
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence, Tuple
+from typing import List, Optional, Sequence
 
 import numpy as np
 
@@ -39,19 +40,25 @@ def trajectory_figure(
     setup: EvaluationSetup,
     methods: Sequence[Method],
     path,
-    agent_counts: Tuple[int, int] = (1, 4),
+    agent_counts: Sequence[int] = (1, 4),
     difficulty: str = "hard",
     seed: int = 0,
-    problems: Tuple[int, int] = (0, 0),
+    problems: Optional[Sequence[int]] = None,
     max_cycles: int = 300,
     dpi: int = 110,
 ) -> Path:
-    """Write a PNG with one row per agent count and one column per method; returns its path."""
+    """Write a PNG with one row per agent count and one column per method; returns its path.
+
+    ``problems`` picks the problem index per row (default: the first problem of each).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    problems = [0] * len(agent_counts) if problems is None else list(problems)
+    if len(problems) != len(agent_counts):
+        raise ValueError(f"{len(agent_counts)} agent counts but {len(problems)} problem indices")
     rows = [_runs(setup, methods, k, difficulty, seed, p, max_cycles) for k, p in zip(agent_counts, problems)]
     field = rows[0][1]
     w, h = field.size
@@ -93,4 +100,82 @@ def trajectory_figure(
     return path
 
 
-__all__ = ["trajectory_figure"]
+def caption(image: np.ndarray, lines: Sequence[str], scale: float = 0.45) -> np.ndarray:
+    """``image`` (RGB) with a white band on top holding ``lines`` of text."""
+    import cv2
+
+    import textwrap
+
+    width = max(20, int(image.shape[1] / (18 * scale)))  # characters that fit on a line
+    lines = [part for line in lines for part in (textwrap.wrap(line, width) or [""])]
+    h_line = int(22 * scale / 0.45)
+    band = np.full((h_line * len(lines) + 6, image.shape[1], 3), 255, np.uint8)
+    for i, text in enumerate(lines):
+        cv2.putText(band, text, (6, h_line * (i + 1)), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([band, image], axis=0)
+
+
+def execution_frames(field, trajectories: np.ndarray, goals: np.ndarray, goal_threshold: float,
+                     waypoints: Optional[Sequence[np.ndarray]] = None, every: int = 1, image_size: int = 480,
+                     title: str = "") -> List[np.ndarray]:
+    """Top-down RGB frames of an execution: ``trajectories`` ``(T + 1, K, 2)``, goals ``(K, 2)``.
+
+    Agents are discs (with a thick ring once arrived), goals crosses, trails lines in the
+    agent's colour and planned waypoints small diamonds on a thin route.
+    """
+    from safe_mapf_envs.rendering import TopDownRenderer
+
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    renderer = TopDownRenderer(field, image_size=image_size)
+    traj = np.asarray(trajectories, dtype=np.float64)
+    at_goal = np.linalg.norm(traj - np.asarray(goals)[None], axis=-1) <= goal_threshold
+    arrived = np.maximum.accumulate(at_goal, axis=0)
+    steps = list(range(0, len(traj), every))
+    if steps[-1] != len(traj) - 1:
+        steps.append(len(traj) - 1)
+    frames = []
+    for t in steps:
+        img = renderer.render(traj[t], goals=goals, trails=[traj[:t + 1, i] for i in range(traj.shape[1])],
+                              waypoints=waypoints, parked=arrived[t])
+        done = int(arrived[t].sum())
+        frames.append(caption(img, [title, f"step {t}: {done}/{traj.shape[1]} agents arrived; "
+                                           "lines: trails, diamonds: planned waypoints, x: goals"]))
+    return frames
+
+
+def write_gif(frames: Sequence[np.ndarray], path, fps: float = 12.0) -> Path:
+    """Write RGB ``frames`` as a looping GIF (Pillow, which matplotlib installs)."""
+    from PIL import Image
+
+    if not len(frames):
+        raise ValueError("no frames to write")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0,
+                   optimize=True)
+    return path
+
+
+def run_animation(setup: EvaluationSetup, method: Method, path, n_agents: int = 5, difficulty: str = "hard",
+                  seed: int = 0, problem: int = 0, max_cycles: int = 300, every: int = 2,
+                  fps: float = 12.0) -> Path:
+    """Run ``method`` on one problem of the evaluation protocol and write the execution as a GIF."""
+    import safe_mapf_envs
+
+    prob, field, runs = _runs(setup, [method], n_agents, difficulty, seed, problem, max_cycles)
+    _, ex, wp = runs[0]
+    env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=n_agents)
+    threshold = float(env.goal_threshold)
+    env.close()
+    agents = f"{n_agents} agent{'s' if n_agents != 1 else ''}"
+    outcome = "all arrived" if ex.success else f"{int(ex.reached.sum())}/{n_agents} arrived"
+    title = (f"{setup.env_id}, {method.label}, {agents} ({difficulty}): {outcome}, "
+             f"max cost {ex.cost.max():.1f}")
+    frames = execution_frames(field, ex.trajectories, prob.goals, threshold, waypoints=wp or None, every=every,
+                              title=title)
+    return write_gif(frames, path, fps=fps)
+
+
+__all__ = ["caption", "execution_frames", "run_animation", "trajectory_figure", "write_gif"]

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 import safe_mapf_envs
+from baselines.figures import caption
 
 
 @dataclass
@@ -72,7 +73,11 @@ def main(cfg: Settings) -> None:
         print(f"{a:>9}: {outcome}  cumulative cost {cost[a]:7.2f}  contacts {contacts[a]}")
     print(f"{len(arrived_at)}/{cfg.n_agents} agents arrived; total cost {sum(cost.values()):.2f}")
     cfg.out.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(cfg.out), cv2.cvtColor(env.render(), cv2.COLOR_RGB2BGR))
+    picture = caption(env.render(), [
+        f"{cfg.env_id}, {cfg.n_agents} agents, seed {cfg.seed}: {len(arrived_at)}/{cfg.n_agents} arrived",
+        "discs: agents (thick ring: arrived), x: goals, lines: trails, black crosses: contacts; red: cost",
+    ])
+    cv2.imwrite(str(cfg.out), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
     print(f"wrote {cfg.out}")
     env.close()
 

@@ -43,6 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
                    help="also draw the trajectory figure (default on)")
+    p.add_argument("--video", action="store_true",
+                   help="also write run.gif: the last search method's execution of the figure's multi-agent problem")
     p.add_argument("--json", action="store_true", help="print the aggregate rows as JSON instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
@@ -158,19 +160,28 @@ def run(args: argparse.Namespace) -> int:
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
     (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
+    # the figure's rows: the smallest evaluated agent count and the largest one up to 10
+    counts = sorted(set(args.agents))
+    multi = max([k for k in counts if k <= 10] or counts[:1])
+    fig_counts = sorted({counts[0], multi})
+    fig_methods = methods
+    if chosen is not None:  # the constrained searches with the cut-off chosen for the figure's largest count
+        fig_methods = [m.with_options(c_max=chosen[multi]) if m.search and math.isfinite(m.c_max) else m
+                       for m in methods]
     if args.figure:
         from baselines.figures import trajectory_figure
 
-        fig_methods = methods
-        if chosen is not None:  # the figure's multi-agent row has 4 agents: the nearest count's cut-off
-            k = min(chosen, key=lambda n: (abs(n - 4), n))
-            fig_methods = [m.with_options(c_max=chosen[k]) if m.search and math.isfinite(m.c_max) else m
-                           for m in methods]
-        trajectory_figure(setup, fig_methods, out / "figure.png", seed=args.seed)
+        trajectory_figure(setup, fig_methods, out / "figure.png", agent_counts=fig_counts, seed=args.seed)
+    if args.video:
+        from baselines.figures import run_animation
+
+        search = [m for m in fig_methods if m.search] or list(fig_methods)
+        run_animation(setup, search[-1], out / "run.gif", n_agents=multi, seed=args.seed,
+                      max_cycles=args.max_cycles)
     if args.json:
         print(json.dumps(agg))
     else:
         print(header + table)
         print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}"
-              + (f", {out / 'figure.png'}" if args.figure else ""))
+              + (f", {out / 'figure.png'}" if args.figure else "") + (f", {out / 'run.gif'}" if args.video else ""))
     return 0

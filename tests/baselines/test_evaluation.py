@@ -229,3 +229,23 @@ def test_evaluate_command_refuses_validation_on_the_test_seed(tmp_path, capsys):
     assert main(["evaluate", "--c-max", "auto", "--validation-seed", "0", "--seed", "0", "--out", str(tmp_path)]) == 2
     assert "--validation-seed must differ from --seed" in capsys.readouterr().err
     assert not (tmp_path / "runs.csv").exists()
+
+
+def test_an_execution_becomes_a_gif_with_a_caption(setup, tmp_path):
+    from PIL import Image
+
+    from baselines.figures import execution_frames, run_animation
+
+    path = run_animation(setup, METHODS["ours"], tmp_path / "run.gif", n_agents=3, difficulty="easy", every=4)
+    with Image.open(path) as gif:
+        assert gif.n_frames >= 3
+        w, h = gif.size
+    env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=1)
+    traj = np.array([[[5.0, 5.0]], [[6.0, 5.0]], [[7.0, 5.0]]])
+    frames = execution_frames(env.field, traj, np.array([[7.0, 5.0]]), env.goal_threshold, every=1, title="t")
+    env.close()
+    assert len(frames) == 3 and frames[0].shape[1:] == (w, 3) and h > frames[0].shape[0] > w  # a caption on top
+    assert (frames[0][:10] == 255).all()  # the caption band on top
+    assert not np.array_equal(frames[0], frames[2])  # the agent moves
+    with pytest.raises(ValueError, match="every must be >= 1"):
+        execution_frames(env.field, traj, np.array([[7.0, 5.0]]), 1.0, every=0)
