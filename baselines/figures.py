@@ -102,9 +102,9 @@ def trajectory_figure(
 
 def caption(image: np.ndarray, lines: Sequence[str], scale: float = 0.45) -> np.ndarray:
     """``image`` (RGB) with a white band on top holding ``lines`` of text."""
-    import cv2
-
     import textwrap
+
+    import cv2
 
     width = max(20, int(image.shape[1] / (18 * scale)))  # characters that fit on a line
     lines = [part for line in lines for part in (textwrap.wrap(line, width) or [""])]

@@ -128,8 +128,8 @@ def main() -> None:
             print(f"{env_id:30s} " + " ".join(f"{c:>20s}" if i != 3 else f"{c:>18s}" for i, c in enumerate(cells)),
                   flush=True)
     if args.json:
-        print(json.dumps([{k: (v if k == "env_id" else {"wall": v[0], "cpu": v[1]}) for k, v in r.items()} for r in rows],
-                         indent=2))
+        out = [{k: (v if k == "env_id" else {"wall": v[0], "cpu": v[1]}) for k, v in r.items()} for r in rows]
+        print(json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":

@@ -121,7 +121,8 @@ def main() -> None:
     print(f"Predicted vs geodesic distance, {s.n_pairs} pairs within {s.pair_max_distance:g} units "
           f"(ensemble max):")
     for name, r in results.items():
-        print(f"  {name:13s} Spearman={r['spearman']:.3f} [{mark(r['spearman'] >= spearman_target)} >= {spearman_target}]")
+        ok = mark(r["spearman"] >= spearman_target)
+        print(f"  {name:13s} Spearman={r['spearman']:.3f} [{ok} >= {spearman_target}]")
 
     if not args.skip_timing:
         model = agents["unconstrained"]

@@ -110,7 +110,8 @@ def contact_sheet(cfg: Settings) -> np.ndarray:
     plan = np.pad(plan, ((40, 10), (10, 10), (0, 0)), constant_values=255)
     label(plan, f"{cfg.env}: plan view (not seen by the agent), {len(traj) - 1} steps", (10, 26), 0.6)
 
-    cv2.arrowedLine(plan, (plan.shape[1] - 24, 34), (plan.shape[1] - 24, 12), (20, 20, 20), 2, cv2.LINE_AA, tipLength=0.4)
+    x = plan.shape[1] - 24
+    cv2.arrowedLine(plan, (x, 34), (x, 12), (20, 20, 20), 2, cv2.LINE_AA, tipLength=0.4)
     label(plan, "N", (plan.shape[1] - 44, 30), 0.5)
     caption = np.full((60, plan.shape[1], 3), 255, np.uint8)
     label(caption, "A, B, ...: where the panoramas on the right were taken; X: the goal.", (10, 22), 0.5, (90, 90, 90))

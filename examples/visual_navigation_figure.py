@@ -25,7 +25,6 @@ import torch
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from panorama_contact_sheet import panorama_strip  # noqa: E402
 
-import safe_mapf_envs  # noqa: E402
 from agents import load_pretrained  # noqa: E402
 from baselines.evaluation import EvaluationSetup, make_problems  # noqa: E402
 from baselines.figures import trajectory_figure  # noqa: E402

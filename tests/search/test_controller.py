@@ -67,7 +67,8 @@ def test_lower_priority_agent_yields_in_a_head_on_encounter():
     plans = {f"agent_{i}": AgentPlan(np.zeros((0, 2), np.float32), goals[i]) for i in range(2)}
     ctrl = WaypointController(straight_policy, euclid_steps, plans, safety_radius=3.0)
     trails = run(env, ctrl, limit=60)
-    d = np.linalg.norm(trails["agent_0"][: len(trails["agent_1"])] - trails["agent_1"][: len(trails["agent_0"])], axis=1)
+    n = min(len(trails["agent_0"]), len(trails["agent_1"]))
+    d = np.linalg.norm(trails["agent_0"][:n] - trails["agent_1"][:n], axis=1)
     assert ctrl.stats.yields > 0
     # agent_1 held still while agent_0 was near (it has the lower priority on a tie)
     held = np.linalg.norm(np.diff(trails["agent_1"], axis=0), axis=1) < 1e-6

@@ -81,7 +81,7 @@ def test_panorama_nodes_plan_valid_waypoints_for_several_agents(world):
     plans = plan.agent_plans()
     assert len(plans) == 3
     node_bytes = {n.tobytes() for n in nodes}
-    for name, ap in plans.items():
+    for ap in plans.values():
         assert ap.goal.shape == (4, 32, 32, 4)
         # the controller's goal inputs are panoramas: buffer nodes (the start's own panorama first)
         assert ap.waypoints.shape[1:] == (4, 32, 32, 4)
