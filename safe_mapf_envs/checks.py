@@ -8,7 +8,7 @@ from __future__ import annotations
 import difflib
 import warnings
 from collections.abc import Mapping
-from typing import Any, Dict, Iterable, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -32,7 +32,7 @@ def show(value: Any) -> str:
     return repr(value)
 
 
-def show_point(p: Sequence[float]) -> str:
+def show_point(p: Union[Sequence[float], np.ndarray]) -> str:
     """A 2D point as ``(x, y)`` with plain numbers."""
     return f"({float(p[0])!r}, {float(p[1])!r})"
 

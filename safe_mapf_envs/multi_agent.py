@@ -252,6 +252,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
 
     def _make_observation_space(self) -> spaces.Dict:
         """One agent's observation space; override together with :meth:`_observe`."""
+        pos: spaces.Box
         if self.sensor is not None:
             pos = spaces.Box(0, 255, shape=self.sensor.shape, dtype=np.uint8)
         else:
@@ -317,7 +318,9 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
                 self._waypoints[i] = None
                 continue
             if arr.ndim != 2 or arr.shape[1] != 2:
-                raise ValueError(f"set_waypoints: waypoints of {self.possible_agents[i]} must have shape (K, 2), got {arr.shape}")
+                raise ValueError(
+                    f"set_waypoints: waypoints of {self.possible_agents[i]} must have shape (K, 2), got {arr.shape}"
+                )
             self._waypoints[i] = arr
 
     def _agent_range(self) -> str:
@@ -362,7 +365,9 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         depends on the generator alone (see :meth:`NavigationScenario.sample_separated
         <safe_mapf_envs.scenario.NavigationScenario.sample_separated>`).
         """
-        return self.scenario.sample_separated(self.n_agents, self.min_separation, rng, max_cost=max_cost, what=what)
+        return self.scenario.sample_separated(
+            self.n_agents, self.min_separation, rng, max_cost=max_cost, what=what, separation_name="min_separation"
+        )
 
     def _sample_goals_in_band(self, starts: np.ndarray, band, rng: np.random.Generator) -> np.ndarray:
         """One goal per agent at a geodesic distance from its own start within ``band``.
@@ -630,7 +635,9 @@ def env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> 
     return wrappers.OrderEnforcingWrapper(raw_env(env_id, n_agents=n_agents, **kwargs))
 
 
-def map_factories(env_id: str, module: str) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
+def map_factories(
+    env_id: str, module: str
+) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
     """``(parallel_env, raw_env, env)`` bound to one registered id, for a per-map module.
 
     The functions take ``n_agents=4`` and the keyword arguments of

@@ -237,7 +237,7 @@ class NavigationScenario:
 
     def sample_separated(
         self, n: int, separation: float, rng: np.random.Generator, max_cost: Optional[float] = None,
-        what: str = "position", rounds: int = 1000,
+        what: str = "position", rounds: int = 1000, separation_name: str = "separation",
     ) -> np.ndarray:
         """``n`` free positions at least ``separation`` apart, shape ``(n, 2)``.
 
@@ -245,15 +245,17 @@ class NavigationScenario:
         that is too close, so the result depends on the generator alone. Counts beyond what
         random sampling can place (see :meth:`max_agents` with :data:`RANDOM_FILL`) fail at
         once; otherwise ``ValueError`` after ``rounds`` rounds, saying how many positions were
-        apart at best.
+        apart at best. ``what`` and ``separation_name`` name the positions and the separation in
+        messages.
         """
         sep = float(separation)
         fit = self.max_agents(sep, RANDOM_FILL)
         if n > max(fit, 1):
             raise ValueError(
-                f"could not place {plural(n, what)} at least {sep:g} apart on {self.layout.name}: random "
-                f"sampling fits about {plural(fit, what)} at that separation in its free area; use at most "
-                f"{fit} or a smaller separation (the least is 2 * agent_radius = {2.0 * self.agent_radius:g})"
+                f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name}: "
+                f"random sampling cannot place more than about {fit} at that separation in its free area; use at "
+                f"most {fit} or a smaller {separation_name} (the least is 2 * agent_radius = "
+                f"{2.0 * self.agent_radius:g})"
             )
         pts = self.sample_states(n, rng, max_cost=max_cost)
         sep2 = sep * sep
@@ -270,8 +272,9 @@ class NavigationScenario:
             best = max(best, n - len(redraw))
             pts[redraw] = self.sample_states(len(redraw), rng, max_cost=max_cost)
         raise ValueError(
-            f"could not place {plural(n, what)} at least {sep:g} apart on {self.layout.name} in {rounds} rounds "
-            f"of sampling (at best {best} were apart); use fewer agents or a smaller separation"
+            f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name} "
+            f"in {rounds} rounds of sampling (at best {best} were apart); use fewer agents or a smaller "
+            f"{separation_name}"
         )
 
 
