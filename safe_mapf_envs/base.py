@@ -32,8 +32,9 @@ RENDER_MODES = ("rgb_array", "human")
 class NavigationEnvBase:
     """The map, settings, sensor, renderer and helpers of a navigation environment (a mixin).
 
-    Subclasses call :meth:`_setup` from ``__init__`` and keep ground truth in world units;
-    they provide ``np_random`` (Gymnasium and PettingZoo environments do).
+    Subclasses call :meth:`_setup` at the start of ``__init__`` and :meth:`_open_window` at
+    its end (so that a failed check leaves no window behind), and keep ground truth in world
+    units; they provide ``np_random`` (Gymnasium and PettingZoo environments do).
     """
 
     #: Observation types this class builds; subclasses extend it with their own.
@@ -84,7 +85,12 @@ class NavigationEnvBase:
         if obs_type == "panorama":
             self.sensor = PanoramaSensor(scene_for_layout(self.scenario.layout), **(sensor_kwargs or {}))
         self._renderer: Optional[TopDownRenderer] = None
-        self._window: Optional[HumanWindow] = HumanWindow(type(self).__name__) if render_mode == "human" else None
+        self._window: Optional[HumanWindow] = None
+
+    def _open_window(self) -> None:
+        """Open the window of the ``human`` render mode (``RuntimeError`` without a display)."""
+        if self.render_mode == "human" and self._window is None:
+            self._window = HumanWindow(type(self).__name__)
 
     # ----------------------------------------------------------------- properties
     @property

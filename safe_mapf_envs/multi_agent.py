@@ -169,6 +169,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         "is_parallelizable": True,
         "render_fps": 10,
     }
+
     def __init__(
         self,
         layout="CentralObstacle",
@@ -240,6 +241,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         self._trail: List[np.ndarray] = []
         self._collision_points: List[np.ndarray] = []
         self._waypoints: List[Optional[np.ndarray]] = [None] * n_agents
+        self._open_window()
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> spaces.Space:

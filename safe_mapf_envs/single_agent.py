@@ -170,6 +170,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         self._goal = np.zeros(2)
         self._trail: List[np.ndarray] = []
         self._waypoints: Optional[np.ndarray] = None
+        self._open_window()
 
     # ----------------------------------------------------------------- properties
     @property
