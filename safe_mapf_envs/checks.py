@@ -143,7 +143,7 @@ def parse_reset_options(options: Optional[Mapping], known: Iterable[str], env_na
                 hints.append(f"did you mean {close[0]!r} for {key!r}?")
         hint = ("; " + "; ".join(hints)) if hints else ""
         warnings.warn(
-            f"{env_name}.reset: ignoring unknown reset options {unknown}; known: {list(known)}{hint}",
+            f"ignoring unknown reset options {unknown} of {env_name}.reset; known: {list(known)}{hint}",
             UserWarning, stacklevel=3,
         )
     return {k: options[k] for k in known if k in options}
