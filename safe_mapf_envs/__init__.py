@@ -19,6 +19,7 @@ Importing the package registers the Gymnasium ids listed in
 
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
+from .base import NavigationEnvBase
 from .cost import COST_FUNCTIONS, ObstacleField
 from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
 from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
@@ -40,6 +41,7 @@ __all__ = [
     "EnvSpec",
     "GridMap",
     "MAPS",
+    "NavigationEnvBase",
     "NavigationScenario",
     "ObstacleField",
     "PanoramaSensor",

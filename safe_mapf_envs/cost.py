@@ -12,6 +12,8 @@ from typing import Callable, Dict, Sequence, Tuple
 
 import numpy as np
 
+from .checks import check_number, show
+
 Box = Tuple[float, float, float, float]
 
 
@@ -57,10 +59,9 @@ class ObstacleField:
         cost_fn: str = "linear",
         boundary_cost: bool = False,
     ) -> None:
-        if not np.isfinite(cost_radius) or cost_radius <= 0:
-            raise ValueError(f"cost_radius must be a positive number, got {cost_radius!r}")
+        cost_radius = check_number(cost_radius, "cost_radius", strict=True)
         if cost_fn not in COST_FUNCTIONS:
-            raise ValueError(f"unknown cost_fn {cost_fn!r}; choose one of {sorted(COST_FUNCTIONS)}")
+            raise ValueError(f"unknown cost_fn {show(cost_fn)}; choose one of {sorted(COST_FUNCTIONS)}")
         self.boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         self.size = (float(size[0]), float(size[1]))
         self.cost_radius = float(cost_radius)

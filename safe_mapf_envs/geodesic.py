@@ -112,7 +112,7 @@ class GeodesicOracle:
         n_samples = int(np.ceil(np.max(np.linalg.norm(b - a, axis=-1), initial=0.0) / (0.25 * self.resolution))) + 2
         t = np.linspace(0.0, 1.0, n_samples)[:, None, None]
         pts = a[None] + t * (b - a)[None]
-        return ~self.field.inside(pts, margin=self.agent_radius * 0.999).any(0)
+        return np.asarray(~self.field.inside(pts, margin=self.agent_radius * 0.999).any(0))
 
     def distance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Geodesic distance from ``a`` to each of ``b`` (``b`` shape ``(..., 2)``), in world units."""

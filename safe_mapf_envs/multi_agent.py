@@ -17,11 +17,9 @@ or through the per-map modules, e.g. ``safe_mapf_envs.multi.central_obstacle_v0.
 from __future__ import annotations
 
 import re
-import warnings
 from collections.abc import Mapping
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
-import gymnasium
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -29,11 +27,10 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from .base import RENDER_MODES, NavigationEnvBase
+from .checks import check_action, check_count, check_number, parse_reset_options, plural, show
 from .registration import env_spec
-from .rendering import HumanWindow, TopDownRenderer
-from .scenario import NavigationScenario
-from .sensors import PanoramaSensor, scene_for_layout
-from .single_agent import check_action
+from .scenario import RANDOM_FILL
 from .world import World
 
 _RESET_OPTIONS = ("starts", "goals", "goal_distance")
@@ -44,13 +41,7 @@ def _snake(name: str) -> str:
     return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
 
 
-def _check_count(value, what: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{what} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-class SafeMultiNavigationEnv(ParallelEnv):
+class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
     """N goal-conditioned agents navigating a shared map with a safety cost (PettingZoo parallel).
 
     ## Description
@@ -70,8 +61,8 @@ class SafeMultiNavigationEnv(ParallelEnv):
     Per agent ``Box(-1, 1, (2,), float32)``: the intended displacement ``(dx, dy)`` in world
     units over one step, applied in physics sub-steps (agents slide along walls and each
     other, never pass through them). ``step`` needs an action for every agent in
-    :attr:`agents`; a missing one, an unknown agent name, NaN, inf or a wrong shape raise
-    ``ValueError``; actions for agents that are already done are ignored; out-of-range
+    :attr:`agents`; a missing one, an unknown agent name, NaN, inf, complex numbers or a wrong
+    shape raise ``ValueError``; actions for agents that are already done are ignored; out-of-range
     actions are clipped to ``[-1, 1]``. Optional Gaussian noise (``action_noise``) is added
     after clipping.
 
@@ -122,8 +113,15 @@ class SafeMultiNavigationEnv(ParallelEnv):
     - ``{"goal_distance": (lo, hi)}`` to sample each goal at a ground-truth geodesic distance
       from its agent's start within the band.
 
-    Other keys are ignored with a warning. With ``max_start_cost`` set, sampled starts are
-    restricted to positions whose cost is at most that value.
+    Other keys are ignored with a ``UserWarning`` that names them, as in the single-agent env
+    (PettingZoo's API test passes a key of its own). ``max_start_cost`` is a constructor
+    argument, not a reset option: with it set, sampled starts are restricted to positions whose
+    cost is at most that value.
+
+    Capacity is checked up front: ``n_agents`` beyond what the map's free area can hold
+    without overlap raises ``ValueError`` in the constructor, and sampling more starts (or
+    goals) than random placement can fit at ``min_separation`` raises at ``reset``; both
+    messages say how many agents fit.
 
     ## Episode End
     An agent is ``terminated`` when its centre comes within ``goal_threshold`` of its goal: it
@@ -158,18 +156,19 @@ class SafeMultiNavigationEnv(ParallelEnv):
     the planned waypoints of :meth:`set_waypoints`; ``"human"`` shows it in a matplotlib
     window and needs a display (``RuntimeError`` otherwise).
 
+    Helpers shared with the single-agent env (see :class:`~safe_mapf_envs.base.NavigationEnvBase`):
+    :meth:`sample_states`, :meth:`geodesic_distance`, :meth:`observations_at`, :meth:`normalize`.
+
     ## Version History
     - v0: initial release.
     """
 
     metadata = {
-        "render_modes": ["rgb_array", "human"],
+        "render_modes": list(RENDER_MODES),
         "name": "safe_multi_navigation_v0",
         "is_parallelizable": True,
         "render_fps": 10,
     }
-    #: Observation types this class builds; subclasses extend it with their own.
-    obs_types: Tuple[str, ...] = ("vector", "panorama")
 
     def __init__(
         self,
@@ -194,48 +193,34 @@ class SafeMultiNavigationEnv(ParallelEnv):
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        if obs_type not in self.obs_types:
-            raise ValueError(f"obs_type must be one of {list(self.obs_types)} for {type(self).__name__}, got {obs_type!r}")
-        n_agents = _check_count(n_agents, "n_agents", 1)
-        self.max_cycles = _check_count(max_cycles, "max_cycles", 1)
-        substeps = _check_count(substeps, "substeps", 1)
-        self.observe_neighbors = _check_count(observe_neighbors, "observe_neighbors", 0)
-        if not np.isfinite(action_noise) or action_noise < 0:
-            raise ValueError(f"action_noise must be >= 0, got {action_noise!r}")
-        if not np.isfinite(goal_threshold) or goal_threshold <= 0:
-            raise ValueError(f"goal_threshold must be > 0, got {goal_threshold!r}")
-        if not np.isfinite(collision_cost) or collision_cost < 0:
-            raise ValueError(f"collision_cost must be >= 0, got {collision_cost!r}")
-        if not np.isfinite(action_scale) or action_scale <= 0:
-            raise ValueError(f"action_scale must be a positive number, got {action_scale!r}")
-        self.scenario = NavigationScenario(
-            layout, agent_radius=agent_radius, cost_radius=cost_radius, cost_fn=cost_fn, boundary_cost=boundary_cost
+        n_agents = check_count(n_agents, "n_agents", 1)
+        self.max_cycles = check_count(max_cycles, "max_cycles", 1)
+        self.observe_neighbors = check_count(observe_neighbors, "observe_neighbors", 0)
+        self.collision_cost = check_number(collision_cost, "collision_cost")
+        self._setup(
+            layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
+            cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
+            substeps=substeps, max_start_cost=max_start_cost, goal_distance=goal_distance, action_scale=action_scale,
+            sensor_kwargs=sensor_kwargs,
         )
         radius = self.scenario.agent_radius
         if min_separation is None:
-            min_separation = 2.0 * radius + goal_threshold
-        if not np.isfinite(min_separation) or min_separation < 2.0 * radius:
+            min_separation = 2.0 * radius + self.goal_threshold
+        min_separation = check_number(min_separation, "min_separation")
+        if min_separation < 2.0 * radius:
             raise ValueError(
                 f"min_separation must be at least 2 * agent_radius = {2.0 * radius:g} (agents would overlap), "
-                f"got {min_separation!r}"
+                f"got {show(min_separation)}"
             )
-        self.render_mode = render_mode
-        self.obs_type = obs_type
-        self.goal_threshold = float(goal_threshold)
-        self.action_noise = float(action_noise)
-        self.substeps = substeps
-        self.max_start_cost = max_start_cost
-        self.goal_distance = goal_distance
-        self.min_separation = float(min_separation)
-        self.collision_cost = float(collision_cost)
+        self.min_separation = min_separation
+        fit = self.scenario.max_agents(2.0 * radius)
+        if n_agents > fit:
+            raise ValueError(
+                f"n_agents={n_agents} cannot fit on {self.scenario.layout.name}: its free area holds at most "
+                f"{plural(fit, 'agent')} of radius {radius:g} without overlap (and sampled starts need more room: "
+                f"about {self.scenario.max_agents(min_separation, RANDOM_FILL)} at min_separation={min_separation:g})"
+            )
         self.metadata = {**type(self).metadata, "name": f"{_snake(self.scenario.layout.name)}_v0"}
-        self._inv_size = 1.0 / self.scenario.size_arr
-        self.action_scale = float(action_scale)
-        self.sensor: Optional[PanoramaSensor] = None
-        if obs_type == "panorama":
-            self.sensor = PanoramaSensor(scene_for_layout(self.scenario.layout), **(sensor_kwargs or {}))
         self._goal_images = np.zeros((n_agents, 0), dtype=np.uint8)
 
         self.possible_agents: List[str] = [f"agent_{i}" for i in range(n_agents)]
@@ -256,8 +241,7 @@ class SafeMultiNavigationEnv(ParallelEnv):
         self._trail: List[np.ndarray] = []
         self._collision_points: List[np.ndarray] = []
         self._waypoints: List[Optional[np.ndarray]] = [None] * n_agents
-        self._renderer: Optional[TopDownRenderer] = None
-        self._window: Optional[HumanWindow] = HumanWindow(type(self).__name__) if render_mode == "human" else None
+        self._open_window()
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> spaces.Space:
@@ -270,6 +254,7 @@ class SafeMultiNavigationEnv(ParallelEnv):
 
     def _make_observation_space(self) -> spaces.Dict:
         """One agent's observation space; override together with :meth:`_observe`."""
+        pos: spaces.Box
         if self.sensor is not None:
             pos = spaces.Box(0, 255, shape=self.sensor.shape, dtype=np.uint8)
         else:
@@ -284,16 +269,6 @@ class SafeMultiNavigationEnv(ParallelEnv):
     def n_agents(self) -> int:
         """Number of agents, live or not (``len(possible_agents)``)."""
         return len(self.possible_agents)
-
-    @property
-    def field(self):
-        """The :class:`~safe_mapf_envs.cost.ObstacleField` (obstacles, cost function)."""
-        return self.scenario.field
-
-    @property
-    def world_size(self) -> Tuple[float, float]:
-        """World extent ``(width, height)`` in units; observations are positions divided by it."""
-        return self.scenario.size
 
     @property
     def positions(self) -> np.ndarray:
@@ -311,22 +286,6 @@ class SafeMultiNavigationEnv(ParallelEnv):
         return np.zeros(self.n_agents, bool) if self._world is None else self._world.parked.copy()
 
     # ----------------------------------------------------------------- helpers
-    def normalize(self, positions: np.ndarray) -> np.ndarray:
-        """World-unit positions ``(..., 2)`` to observations in ``[0, 1]`` (float32)."""
-        return (np.asarray(positions, dtype=np.float64) * self._inv_size).astype(np.float32)
-
-    def denormalize(self, observations: np.ndarray) -> np.ndarray:
-        """Observations in ``[0, 1]`` back to world-unit positions."""
-        return np.asarray(observations, dtype=np.float64) * self.scenario.size_arr
-
-    def sample_states(self, n: int, rng: Optional[np.random.Generator] = None, max_cost: Optional[float] = None) -> np.ndarray:
-        """``n`` random free positions (world units), shape ``(n, 2)``."""
-        return self.scenario.sample_states(n, rng if rng is not None else self.np_random, max_cost=max_cost)
-
-    def geodesic_distance(self, a, b) -> np.ndarray:
-        """Ground-truth shortest collision-free path length between world points (evaluation only)."""
-        return self.scenario.geodesic_distance(a, b)
-
     def set_waypoints(
         self, waypoints: Union[None, Mapping[str, Optional[np.ndarray]], Sequence[Optional[np.ndarray]]]
     ) -> None:
@@ -361,7 +320,9 @@ class SafeMultiNavigationEnv(ParallelEnv):
                 self._waypoints[i] = None
                 continue
             if arr.ndim != 2 or arr.shape[1] != 2:
-                raise ValueError(f"set_waypoints: waypoints of {self.possible_agents[i]} must have shape (K, 2), got {arr.shape}")
+                raise ValueError(
+                    f"set_waypoints: waypoints of {self.possible_agents[i]} must have shape (K, 2), got {arr.shape}"
+                )
             self._waypoints[i] = arr
 
     def _agent_range(self) -> str:
@@ -372,9 +333,14 @@ class SafeMultiNavigationEnv(ParallelEnv):
         """Validate user-given starts or goals: one free position per agent, no two overlapping."""
         n, sc = self.n_agents, self.scenario
         try:
-            p = np.asarray(points, dtype=np.float64)
+            raw = np.asarray(points)
+            if raw.dtype.kind == "c":
+                raise TypeError("complex positions")
+            p = raw.astype(np.float64)
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"{what}s must be one (x, y) pair per agent ({n} agents), got {points!r}") from exc
+            raise ValueError(
+                f"{what}s must be one real (x, y) pair per agent ({plural(n, 'agent')}), got {show(points)}"
+            ) from exc
         if p.shape != (n, 2):
             raise ValueError(f"{what}s must be one (x, y) pair per agent: shape ({n}, 2), got shape {p.shape}")
         finite = np.isfinite(p).all(axis=1)
@@ -398,20 +364,11 @@ class SafeMultiNavigationEnv(ParallelEnv):
         """``n_agents`` free positions at least ``min_separation`` apart.
 
         Every round redraws the later agent of each pair that is too close, so the result
-        depends on the generator alone.
+        depends on the generator alone (see :meth:`NavigationScenario.sample_separated
+        <safe_mapf_envs.scenario.NavigationScenario.sample_separated>`).
         """
-        n, sc, sep = self.n_agents, self.scenario, self.min_separation
-        pts = sc.sample_states(n, rng, max_cost=max_cost)
-        for _ in range(1000):
-            diff = pts[:, None] - pts[None]
-            close = np.triu((diff * diff).sum(-1) < sep * sep, k=1)
-            redraw = np.flatnonzero(close.any(axis=0))
-            if len(redraw) == 0:
-                return pts
-            pts[redraw] = sc.sample_states(len(redraw), rng, max_cost=max_cost)
-        raise ValueError(
-            f"could not place {n} {what}s at least min_separation={sep:g} apart on {sc.layout.name}; "
-            "use fewer agents or a smaller min_separation"
+        return self.scenario.sample_separated(
+            self.n_agents, self.min_separation, rng, max_cost=max_cost, what=what, separation_name="min_separation"
         )
 
     def _sample_goals_in_band(self, starts: np.ndarray, band, rng: np.random.Generator) -> np.ndarray:
@@ -421,6 +378,13 @@ class SafeMultiNavigationEnv(ParallelEnv):
         too close to an earlier agent's goal is repeated.
         """
         sc, sep = self.scenario, self.min_separation
+        fit = sc.max_agents(sep, RANDOM_FILL)
+        if len(starts) > max(fit, 1):
+            raise ValueError(
+                f"could not place {plural(len(starts), 'goal')} at least min_separation={sep:g} apart on "
+                f"{sc.layout.name}: random sampling fits about {plural(fit, 'goal')} at that separation; "
+                "use fewer agents or a smaller min_separation"
+            )
         goals = np.empty_like(starts)
         for i, start in enumerate(starts):
             for _ in range(100):
@@ -430,7 +394,7 @@ class SafeMultiNavigationEnv(ParallelEnv):
                     break
             else:
                 raise ValueError(
-                    f"could not place the goal of agent_{i} in the goal_distance band {tuple(band)} at least "
+                    f"could not place the goal of agent_{i} in the goal_distance band {show(tuple(band))} at least "
                     f"min_separation={sep:g} from the other goals; use fewer agents or a wider band"
                 )
         return goals
@@ -502,12 +466,10 @@ class SafeMultiNavigationEnv(ParallelEnv):
 
     # ----------------------------------------------------------------- PettingZoo API
     def reset(self, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
+        """Start an episode; see Starting State in the class docstring for ``options``."""
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(_RESET_OPTIONS), key=str)
-        if unknown:
-            warnings.warn(f"ignoring unknown reset options {unknown}; known: {list(_RESET_OPTIONS)}", stacklevel=2)
+        options = parse_reset_options(options, _RESET_OPTIONS, type(self).__name__)
         sc, rng = self.scenario, self.np_random
         if options.get("starts") is not None:
             starts = self._check_positions(options["starts"], "start")
@@ -553,8 +515,11 @@ class SafeMultiNavigationEnv(ParallelEnv):
                 raise ValueError(f"actions for unknown agents {unknown}; agents are {self._agent_range()}")
         acts = [actions[a] for a in agents]
         try:
-            arr = np.array(acts, dtype=np.float64)
-            ok = arr.shape == (len(agents), 2) and bool(np.isfinite(arr).all())
+            raw = np.array(acts)
+            ok = raw.dtype.kind in "fiub"  # not complex, strings or objects
+            if ok:
+                arr = raw.astype(np.float64)
+                ok = arr.shape == (len(agents), 2) and bool(np.isfinite(arr).all())
         except (TypeError, ValueError):
             ok = False
         if not ok:  # find the culprit and say what is wrong with it
@@ -563,10 +528,11 @@ class SafeMultiNavigationEnv(ParallelEnv):
                     check_action(act)
                 except ValueError as exc:
                     raise ValueError(f"{name}: {exc}") from None
-            raise ValueError(f"actions must be (2,) arrays of finite numbers, got {actions!r}")
+            raise ValueError(f"actions must be (2,) arrays of finite real numbers, got {show(actions)}")
         return arr
 
     def step(self, actions: Dict[str, Any]):
+        """Move every live agent by its action; returns PettingZoo's five per-agent dicts."""
         if self._world is None:
             raise RuntimeError("call reset() before step()")
         if not self.agents:
@@ -627,29 +593,15 @@ class SafeMultiNavigationEnv(ParallelEnv):
         return np.concatenate([self.normalize(self._pos).ravel(), self._goals_norm.ravel()])
 
     # ----------------------------------------------------------------- rendering
-    def render(self):
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        if self._world is None:
+    def render(self) -> Optional[np.ndarray]:
+        """The top-down frame (``rgb_array``), or ``None`` after showing it (``human``)."""
+        if self.render_mode is not None and self._world is None:
             raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            self._renderer = TopDownRenderer(self.scenario.field, agent_radius=self.scenario.agent_radius)
-        trails = np.stack(self._trail, axis=1)  # (N, T, 2)
-        img = self._renderer.render(
-            self._pos, goals=self._goals, trails=list(trails), waypoints=self._waypoints,
-            collisions=self._collision_points, parked=self._world.parked,
+        trails = np.stack(self._trail, axis=1) if self._trail else np.zeros((self.n_agents, 0, 2))  # (N, T, 2)
+        return self._draw(
+            self._pos, self._goals, list(trails), self._waypoints,
+            collisions=self._collision_points, parked=None if self._world is None else self._world.parked,
         )
-        if self._window is not None:
-            self._window.show(img)
-            return None
-        return img
-
-    def close(self) -> None:
-        if self._window is not None:
-            self._window.close()
-            self._window = None
-        self._renderer = None
 
 
 # --------------------------------------------------------------------- factories
@@ -685,7 +637,9 @@ def env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> 
     return wrappers.OrderEnforcingWrapper(raw_env(env_id, n_agents=n_agents, **kwargs))
 
 
-def map_factories(env_id: str, module: str) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
+def map_factories(
+    env_id: str, module: str
+) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
     """``(parallel_env, raw_env, env)`` bound to one registered id, for a per-map module.
 
     The functions take ``n_agents=4`` and the keyword arguments of

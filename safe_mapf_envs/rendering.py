@@ -5,7 +5,7 @@ frame; agents, goals, trails, planned waypoints and collision markers are drawn 
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
@@ -60,7 +60,7 @@ class TopDownRenderer:
         cv2.rectangle(img, (0, 0), (self.width - 1, self.height - 1), (0, 0, 0), thickness=2)
         return img
 
-    def px(self, point: Sequence[float]) -> tuple:
+    def px(self, point: Union[Sequence[float], np.ndarray]) -> Tuple[int, int]:
         """Pixel coordinates of a world point."""
         return (int(round(point[0] * self.scale)), int(round(point[1] * self.scale)))
 
@@ -104,24 +104,24 @@ class TopDownRenderer:
                     cv2.polylines(img, [poly], True, col, 1, cv2.LINE_AA)
         if trails is not None:
             for i, trail in enumerate(trails):
-                trail = np.asarray(trail).reshape(-1, 2)
-                if len(trail) > 1:
-                    pts = np.array([self.px(p) for p in trail], np.int32)
-                    cv2.polylines(img, [pts], False, agent_colour(i), 2, cv2.LINE_AA)
+                path = np.asarray(trail).reshape(-1, 2)
+                if len(path) > 1:
+                    line = np.array([self.px(p) for p in path], np.int32)
+                    cv2.polylines(img, [line], False, agent_colour(i), 2, cv2.LINE_AA)
         if goals is not None:
             for i, g in enumerate(np.asarray(goals).reshape(-1, 2)):
                 c = self.px(g)
                 d = r + 2
                 cv2.line(img, (c[0] - d, c[1] - d), (c[0] + d, c[1] + d), agent_colour(i), 2, cv2.LINE_AA)
                 cv2.line(img, (c[0] - d, c[1] + d), (c[0] + d, c[1] - d), agent_colour(i), 2, cv2.LINE_AA)
-        for i, p in enumerate(positions):
-            c = self.px(p)
+        for i, centre in enumerate(positions):
+            c = self.px(centre)
             cv2.circle(img, c, r, agent_colour(i), -1, cv2.LINE_AA)
             ring = 2 if parked is not None and parked[i] else 1
             cv2.circle(img, c, r, (0, 0, 0), ring, cv2.LINE_AA)
         if collisions is not None:
-            for p in collisions:
-                c = self.px(p)
+            for point in collisions:
+                c = self.px(point)
                 cv2.drawMarker(img, c, (0, 0, 0), cv2.MARKER_TILTED_CROSS, 2 * r + 4, 2)
         return img
 
@@ -149,7 +149,7 @@ class HumanWindow:
             self._fig.canvas.manager.set_window_title(title)
         ax.set_axis_off()
         self._ax = ax
-        self._im = None
+        self._im: Any = None  # the AxesImage, made on the first frame
 
     def show(self, frame: np.ndarray) -> None:
         if self._im is None:

@@ -6,7 +6,9 @@ from __future__ import annotations
 from typing import Optional, Protocol, Sequence, Tuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from .checks import check_band, check_count, check_number, plural, show, show_point
 from .cost import ObstacleField
 from .geodesic import GeodesicOracle
 from .maps import get_map
@@ -24,11 +26,31 @@ class Layout(Protocol):
     def boxes(self) -> Sequence[Tuple[float, float, float, float]]: ...
 
 
+#: Largest share of an area that discs placed uniformly at random, without overlap, cover: random
+#: sequential placement jams at about 0.547 of the plane (Feder, 1980). Sampling more agents
+#: than this share allows is hopeless, however long it runs.
+RANDOM_FILL = 0.55
+
+
 def resolve_layout(layout) -> Layout:
     """Accept a layout object or the name of a registered map."""
     if isinstance(layout, str):
         return get_map(layout)
     return layout
+
+
+def union_area(boxes: np.ndarray) -> float:
+    """Exact area of the union of axis-aligned boxes ``(x0, y0, x1, y1)`` (empty ones are ignored)."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    b = b[(b[:, 2] > b[:, 0]) & (b[:, 3] > b[:, 1])]
+    if not len(b):
+        return 0.0
+    xs, ys = np.unique(b[:, [0, 2]]), np.unique(b[:, [1, 3]])
+    covered = np.zeros((len(xs) - 1, len(ys) - 1), dtype=bool)
+    ix, iy = np.searchsorted(xs, b[:, [0, 2]]), np.searchsorted(ys, b[:, [1, 3]])
+    for (i0, i1), (j0, j1) in zip(ix, iy):
+        covered[i0:i1, j0:j1] = True
+    return float(np.diff(xs) @ covered @ np.diff(ys))
 
 
 class NavigationScenario:
@@ -54,10 +76,9 @@ class NavigationScenario:
         geodesic_resolution: Optional[float] = None,
     ) -> None:
         self.layout = resolve_layout(layout)
-        if not np.isfinite(agent_radius) or agent_radius <= 0:
-            raise ValueError(f"agent_radius must be a positive number, got {agent_radius!r}")
-        self.agent_radius = float(agent_radius)
-        self.size = tuple(float(s) for s in self.layout.size)
+        self.agent_radius = check_number(agent_radius, "agent_radius", strict=True)
+        w, h = self.layout.size
+        self.size: Tuple[float, float] = (float(w), float(h))
         self.size_arr = np.array(self.size, dtype=np.float64)
         self.boxes = list(self.layout.boxes())
         r = self.layout.cost_radius if cost_radius is None else cost_radius
@@ -78,19 +99,40 @@ class NavigationScenario:
         """``True`` where an agent centred at the point overlaps no obstacle and stays inside the world."""
         return ~self.field.inside(points, margin=self.agent_radius)
 
+    def _as_points(self, points, what: str) -> np.ndarray:
+        """``points`` as a finite float array of shape ``(..., 2)``, or ``ValueError`` naming ``what``."""
+        try:
+            raw = np.asarray(points)
+            if raw.dtype.kind == "c":
+                raise TypeError("complex")
+            p = raw.astype(np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be real (x, y) positions, got {show(points)}") from None
+        if p.ndim == 0 or p.shape[-1] != 2:
+            raise ValueError(f"{what} must be an (x, y) pair or an array of them (..., 2), got shape {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"{what} must be finite, got {show(points)}")
+        return p
+
     def check_position(self, point, what: str) -> np.ndarray:
         """Validate a user-given position; return it as a float array or raise ``ValueError``."""
-        p = np.asarray(point, dtype=np.float64)
+        try:
+            raw = np.asarray(point)
+            p = raw.astype(np.float64) if raw.dtype.kind != "c" else None
+        except (TypeError, ValueError):
+            p = None
+        if p is None:
+            raise ValueError(f"{what} must be a real (x, y) pair, got {show(point)}")
         if p.shape != (2,):
-            raise ValueError(f"{what} must be an (x, y) pair, got shape {p.shape}: {point!r}")
+            raise ValueError(f"{what} must be an (x, y) pair, got shape {p.shape}: {show(point)}")
         if not np.all(np.isfinite(p)):
-            raise ValueError(f"{what} must be finite, got {point!r}")
+            raise ValueError(f"{what} must be finite, got {show(point)}")
         w, h = self.size
         if not (0.0 <= p[0] <= w and 0.0 <= p[1] <= h):
-            raise ValueError(f"{what} {tuple(p)} lies outside the {w:g} x {h:g} world")
+            raise ValueError(f"{what} {show_point(p)} lies outside the {w:g} x {h:g} world")
         if not self.is_free(p):
             raise ValueError(
-                f"{what} {tuple(p)} is inside an obstacle or closer than the agent radius "
+                f"{what} {show_point(p)} is inside an obstacle or closer than the agent radius "
                 f"{self.agent_radius:g} to one"
             )
         return p
@@ -103,8 +145,11 @@ class NavigationScenario:
     ) -> np.ndarray:
         """Sample ``n`` free positions uniformly, optionally only where the cost is at most ``max_cost``.
 
-        Returns an ``(n, 2)`` array in world units.
+        Returns an ``(n, 2)`` array in world units; ``n`` must be an integer >= 0.
         """
+        n = check_count(n, "n", 0)
+        if max_cost is not None:
+            max_cost = check_number(max_cost, "max_cost")
         out = np.empty((0, 2))
         for _ in range(1000):
             cand = rng.uniform(0.0, 1.0, size=(max(2 * (n - len(out)), 16), 2)) * self.size_arr
@@ -115,20 +160,18 @@ class NavigationScenario:
             if len(out) >= n:
                 return out[:n]
         raise ValueError(
-            f"could not sample {n} free states"
-            + (f" with cost <= {max_cost}" if max_cost is not None else "")
+            f"could not sample {plural(n, 'free state')}"
+            + (f" with cost <= {max_cost:g}" if max_cost is not None else "")
             + f" on {self.layout.name}"
         )
 
     def sample_goal_in_band(self, start: np.ndarray, band: Tuple[float, float], rng: np.random.Generator) -> np.ndarray:
         """Sample a free goal whose ground-truth geodesic distance from ``start`` lies in ``band``."""
-        lo, hi = float(band[0]), float(band[1])
-        if not (np.isfinite(lo) and np.isfinite(hi)) or lo < 0 or hi < lo:
-            raise ValueError(f"goal_distance must be a (lo, hi) band with 0 <= lo <= hi, got {band!r}")
+        lo, hi = check_band(band)
         oracle = self.oracle
         cells, _ = oracle.band_cells(start, lo, hi)
         if len(cells) == 0:
-            raise ValueError(f"no free goal at geodesic distance in [{lo:g}, {hi:g}] from start {tuple(start)}")
+            raise ValueError(f"no free goal at geodesic distance in [{lo:g}, {hi:g}] from start {show_point(start)}")
         centres = oracle.centres.reshape(-1, 2)
         res = oracle.resolution
         for _ in range(100):
@@ -142,8 +185,97 @@ class NavigationScenario:
         return centres[cells[rng.integers(len(cells))]].copy()
 
     def geodesic_distance(self, a, b) -> np.ndarray:
-        """Ground-truth shortest collision-free path length from ``a`` to ``b`` (``b`` may be ``(..., 2)``)."""
-        return self.oracle.distance(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+        """Ground-truth shortest collision-free path length from ``a`` to ``b`` (``b`` may be ``(..., 2)``).
+
+        Points closer to an obstacle than the agent radius are measured from the nearest
+        position an agent can take; points outside the world or inside an obstacle raise
+        ``ValueError`` (there is no path to them).
+        """
+        pa = self._as_points(a, "geodesic_distance: a")
+        if pa.shape != (2,):
+            raise ValueError(f"geodesic_distance: a must be one (x, y) pair, got shape {pa.shape}")
+        pb = self._as_points(b, "geodesic_distance: b")
+        for name, p in (("a", pa), ("b", pb)):
+            bad = self.field.inside(p.reshape(-1, 2))
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                q = p.reshape(-1, 2)[k]
+                where = name if p.ndim == 1 else f"{name}[{', '.join(map(str, np.unravel_index(k, p.shape[:-1])))}]"
+                w, h = self.size
+                reason = (f"lies outside the {w:g} x {h:g} world" if not (0 <= q[0] <= w and 0 <= q[1] <= h)
+                          else "is inside an obstacle")
+                raise ValueError(f"geodesic_distance: {where} = {show_point(q)} {reason}")
+        return self.oracle.distance(pa, pb)
+
+    # ----------------------------------------------------------------- capacity
+    def max_agents(self, separation: float, fill: float = 1.0) -> int:
+        """An upper bound on how many free positions fit at least ``separation`` apart.
+
+        Discs of radius ``separation / 2`` around such positions do not overlap and lie in
+        the world grown by ``separation / 2 - agent_radius`` less the obstacles shrunk by as
+        much, so their number is at most ``fill`` times that area over a disc's area.
+        ``fill=1`` bounds every arrangement; :data:`RANDOM_FILL` bounds random sampling.
+
+        Args:
+            separation: smallest distance between positions, at least ``2 * agent_radius``.
+            fill: the share of the area the discs can cover, in ``(0, 1]``.
+        """
+        s = float(separation)
+        if not s >= 2.0 * self.agent_radius:
+            raise ValueError(f"separation must be at least 2 * agent_radius = {2.0 * self.agent_radius:g}, got {s:g}")
+        return int(np.floor(fill * self.area_around_free(s / 2.0) / (np.pi * s * s / 4.0)))
+
+    def area_around_free(self, reach: float) -> float:
+        """An upper bound on the area within ``reach`` (>= agent radius) of the free positions."""
+        e = float(reach) - self.agent_radius
+        w, h = self.size
+        shrunk = self.field.boxes + np.array([e, e, -e, -e])
+        shrunk[:, :2] = np.maximum(shrunk[:, :2], -e)
+        shrunk[:, 2] = np.minimum(shrunk[:, 2], w + e)
+        shrunk[:, 3] = np.minimum(shrunk[:, 3], h + e)
+        return (w + 2 * e) * (h + 2 * e) - union_area(shrunk)
+
+    def sample_separated(
+        self, n: int, separation: float, rng: np.random.Generator, max_cost: Optional[float] = None,
+        what: str = "position", rounds: int = 1000, separation_name: str = "separation",
+    ) -> np.ndarray:
+        """``n`` free positions at least ``separation`` apart, shape ``(n, 2)``.
+
+        All ``n`` are drawn at once; then every round redraws the later position of each pair
+        that is too close, so the result depends on the generator alone. Counts beyond what
+        random sampling can place (see :meth:`max_agents` with :data:`RANDOM_FILL`) fail at
+        once; otherwise ``ValueError`` after ``rounds`` rounds, saying how many positions were
+        apart at best. ``what`` and ``separation_name`` name the positions and the separation in
+        messages.
+        """
+        sep = float(separation)
+        fit = self.max_agents(sep, RANDOM_FILL)
+        if n > max(fit, 1):
+            raise ValueError(
+                f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name}: "
+                f"random sampling cannot place more than about {fit} at that separation in its free area; use at "
+                f"most {fit} or a smaller {separation_name} (the least is 2 * agent_radius = "
+                f"{2.0 * self.agent_radius:g})"
+            )
+        pts = self.sample_states(n, rng, max_cost=max_cost)
+        sep2 = sep * sep
+        reach = sep * (1.0 + 1e-9) + 1e-12  # candidate pairs; the exact test follows
+        best = 0
+        for _ in range(rounds):
+            pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
+            if len(pairs):
+                d = pts[pairs[:, 0]] - pts[pairs[:, 1]]
+                pairs = pairs[(d * d).sum(-1) < sep2]
+            redraw = np.unique(pairs.max(axis=1)) if len(pairs) else np.zeros(0, np.intp)
+            if len(redraw) == 0:
+                return pts
+            best = max(best, n - len(redraw))
+            pts[redraw] = self.sample_states(len(redraw), rng, max_cost=max_cost)
+        raise ValueError(
+            f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name} "
+            f"in {rounds} rounds of sampling (at best {best} were apart); use fewer agents or a smaller "
+            f"{separation_name}"
+        )
 
 
-__all__ = ["Layout", "NavigationScenario", "resolve_layout"]
+__all__ = ["Layout", "NavigationScenario", "RANDOM_FILL", "resolve_layout", "union_area"]

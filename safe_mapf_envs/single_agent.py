@@ -1,32 +1,20 @@
 """The single-agent goal-conditioned safe navigation environment (Gymnasium)."""
 from __future__ import annotations
 
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .rendering import HumanWindow, TopDownRenderer
-from .scenario import NavigationScenario
-from .sensors import PanoramaSensor, scene_for_layout
+from .base import RENDER_MODES, NavigationEnvBase
+from .checks import check_action, parse_reset_options
 from .world import World
 
-
-def check_action(action, shape: Tuple[int, ...] = (2,)) -> np.ndarray:
-    """Return ``action`` as a float64 array, raising ``ValueError`` on a wrong shape, NaN or inf."""
-    try:
-        a = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"action must be numeric with shape {shape}, got {action!r}") from exc
-    if a.shape != shape:
-        raise ValueError(f"action must have shape {shape}, got shape {a.shape}: {action!r}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"action must be finite, got {action!r}")
-    return a
+_RESET_OPTIONS = ("start", "goal", "goal_distance")
 
 
-class SafeNavigationEnv(gym.Env):
+class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     """Goal-conditioned navigation with a safety cost, on a pymunk collision world.
 
     ## Description
@@ -45,8 +33,8 @@ class SafeNavigationEnv(gym.Env):
     ``Box(-1, 1, (2,), float32)``: the intended displacement ``(dx, dy)`` over one step, in
     units of ``action_scale`` world units (1 on the 2D maps, 0.25 m on the apartments). It is
     applied in physics sub-steps, so the agent slides along walls and never passes through
-    them. Out-of-range actions are clipped to ``[-1, 1]``; NaN, inf and wrong shapes raise
-    ``ValueError``. Optional Gaussian noise (``action_noise``) is added after clipping.
+    them. Out-of-range actions are clipped to ``[-1, 1]``; NaN, inf, complex numbers and wrong
+    shapes raise ``ValueError``. Optional Gaussian noise (``action_noise``) is added after clipping.
 
     ## Observation Space
     A ``Dict`` in the goal-conditioned convention of Gymnasium-Robotics (usable with SB3's
@@ -90,8 +78,10 @@ class SafeNavigationEnv(gym.Env):
     - ``{"goal_distance": (lo, hi)}`` to sample a goal whose ground-truth geodesic distance from
       the start lies in the band.
 
-    With ``max_start_cost`` set, sampled starts are restricted to positions whose cost is at
-    most that value.
+    Other keys are ignored with a ``UserWarning`` that names them, in both the single- and
+    the multi-agent env (generic tools such as PettingZoo's API test pass keys of their own).
+    ``max_start_cost`` is a constructor argument, not a reset option: with it set, sampled
+    starts are restricted to positions whose cost is at most that value.
 
     ## Episode End
     ``terminated`` when the agent's centre is within ``goal_threshold`` units of the goal;
@@ -127,11 +117,18 @@ class SafeNavigationEnv(gym.Env):
     agent, goal, trail and planned waypoints (see :meth:`set_waypoints`); ``"human"`` shows it
     in a matplotlib window and needs a display (``RuntimeError`` otherwise).
 
+    Helpers for evaluation and planning (shared with the multi-agent env, see
+    :class:`~safe_mapf_envs.base.NavigationEnvBase`): :meth:`sample_states`,
+    :meth:`geodesic_distance`, :meth:`observations_at`, :meth:`normalize`.
+
+    SB3's ``check_env`` calls ``compute_reward`` on the object it is given, which Gymnasium's
+    wrappers do not forward: check ``gymnasium.make(id).unwrapped``.
+
     ## Version History
     - v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 10}
 
     def __init__(
         self,
@@ -151,61 +148,31 @@ class SafeNavigationEnv(gym.Env):
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
     ) -> None:
-        if obs_type not in ("vector", "panorama"):
-            raise ValueError(f"obs_type must be 'vector' or 'panorama', got {obs_type!r}")
-        if not np.isfinite(action_scale) or action_scale <= 0:
-            raise ValueError(f"action_scale must be a positive number, got {action_scale!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        if substeps < 1:
-            raise ValueError(f"substeps must be >= 1, got {substeps!r}")
-        if not np.isfinite(action_noise) or action_noise < 0:
-            raise ValueError(f"action_noise must be >= 0, got {action_noise!r}")
-        if not np.isfinite(goal_threshold) or goal_threshold <= 0:
-            raise ValueError(f"goal_threshold must be > 0, got {goal_threshold!r}")
-        self.scenario = NavigationScenario(
-            layout, agent_radius=agent_radius, cost_radius=cost_radius, cost_fn=cost_fn, boundary_cost=boundary_cost
+        self._setup(
+            layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
+            cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
+            substeps=substeps, max_start_cost=max_start_cost, goal_distance=goal_distance, action_scale=action_scale,
+            sensor_kwargs=sensor_kwargs,
         )
-        self.render_mode = render_mode
-        self.goal_threshold = float(goal_threshold)
-        self.action_noise = float(action_noise)
-        self.substeps = int(substeps)
-        self.max_start_cost = max_start_cost
-        self.goal_distance = goal_distance
-        self._inv_size = 1.0 / self.scenario.size_arr
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        self.obs_type = obs_type
-        self.action_scale = float(action_scale)
-        self.sensor: Optional[PanoramaSensor] = None
-        if obs_type == "panorama":
-            self.sensor = PanoramaSensor(scene_for_layout(self.scenario.layout), **(sensor_kwargs or {}))
+        pos_space: spaces.Box
+        if self.sensor is not None:
             pos_space = spaces.Box(0, 255, shape=self.sensor.shape, dtype=np.uint8)
         else:
             pos_space = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
         self._goal_ndim = len(pos_space.shape)
-        self._goal_image: Optional[np.ndarray] = None
+        self._goal_image = np.zeros(0, dtype=np.uint8)
         self.observation_space = spaces.Dict(
             {"observation": pos_space, "achieved_goal": pos_space, "desired_goal": pos_space}
         )
         self._world: Optional[World] = None
         self._pos = np.zeros(2)
         self._goal = np.zeros(2)
-        self._trail: list = []
+        self._trail: List[np.ndarray] = []
         self._waypoints: Optional[np.ndarray] = None
-        self._renderer: Optional[TopDownRenderer] = None
-        self._window: Optional[HumanWindow] = HumanWindow(type(self).__name__) if render_mode == "human" else None
+        self._open_window()
 
     # ----------------------------------------------------------------- properties
-    @property
-    def field(self):
-        """The :class:`~safe_mapf_envs.cost.ObstacleField` (obstacles, cost function)."""
-        return self.scenario.field
-
-    @property
-    def world_size(self) -> Tuple[float, float]:
-        """World extent ``(width, height)`` in units; observations are positions divided by it."""
-        return self.scenario.size
-
     @property
     def position(self) -> np.ndarray:
         """Ground-truth agent position (world units)."""
@@ -217,22 +184,6 @@ class SafeNavigationEnv(gym.Env):
         return self._goal.copy()
 
     # ----------------------------------------------------------------- helpers
-    def normalize(self, positions: np.ndarray) -> np.ndarray:
-        """World-unit positions ``(..., 2)`` to observations in ``[0, 1]`` (float32)."""
-        return (np.asarray(positions, dtype=np.float64) * self._inv_size).astype(np.float32)
-
-    def denormalize(self, observations: np.ndarray) -> np.ndarray:
-        """Observations in ``[0, 1]`` back to world-unit positions."""
-        return np.asarray(observations, dtype=np.float64) * self.scenario.size_arr
-
-    def sample_states(self, n: int, rng: Optional[np.random.Generator] = None, max_cost: Optional[float] = None) -> np.ndarray:
-        """``n`` random free positions (world units), shape ``(n, 2)``."""
-        return self.scenario.sample_states(n, rng if rng is not None else self.np_random, max_cost=max_cost)
-
-    def geodesic_distance(self, a, b) -> np.ndarray:
-        """Ground-truth shortest collision-free path length between world points (evaluation only)."""
-        return self.scenario.geodesic_distance(a, b)
-
     def set_waypoints(self, waypoints: Optional[np.ndarray]) -> None:
         """Planned waypoints (world units, ``(K, 2)``) to draw in rendered frames; ``None`` clears them."""
         self._waypoints = None if waypoints is None else np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
@@ -256,11 +207,9 @@ class SafeNavigationEnv(gym.Env):
 
     # ----------------------------------------------------------------- gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
+        """Start an episode; see Starting State in the class docstring for ``options``."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"start", "goal", "goal_distance"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected 'start', 'goal', 'goal_distance'")
+        options = parse_reset_options(options, _RESET_OPTIONS, type(self).__name__)
         sc = self.scenario
         rng = self.np_random
         if options.get("start") is not None:
@@ -284,6 +233,7 @@ class SafeNavigationEnv(gym.Env):
         return self._obs(), self._info(cost)
 
     def step(self, action):
+        """Move the agent by ``action``; returns ``(obs, -1.0, terminated, False, info)``."""
         if self._world is None:
             raise RuntimeError("call reset() before step()")
         a = check_action(action)
@@ -304,7 +254,7 @@ class SafeNavigationEnv(gym.Env):
         return obs, -1.0, terminated, False, info
 
     # ----------------------------------------------------------------- GoalEnv API
-    def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
+    def compute_reward(self, achieved_goal, desired_goal, info) -> Union[float, np.ndarray]:
         """Reward for (batches of) achieved/desired goals: -1 everywhere, as returned by :meth:`step`."""
         a = np.asarray(achieved_goal)
         shape = a.shape[: a.ndim - self._goal_ndim]
@@ -312,7 +262,7 @@ class SafeNavigationEnv(gym.Env):
             return -1.0
         return -np.ones(shape, dtype=np.float32)
 
-    def compute_terminated(self, achieved_goal, desired_goal, info) -> np.ndarray:
+    def compute_terminated(self, achieved_goal, desired_goal, info) -> Union[bool, np.ndarray]:
         """``True`` where the achieved goal is within ``goal_threshold`` world units of the desired goal.
 
         With panorama goals: ``True`` where the two images are identical (see Episode End).
@@ -325,33 +275,21 @@ class SafeNavigationEnv(gym.Env):
         done = np.linalg.norm(diff, axis=-1) <= self.goal_threshold
         return bool(done) if done.ndim == 0 else done
 
-    def compute_truncated(self, achieved_goal, desired_goal, info) -> np.ndarray:
+    def compute_truncated(self, achieved_goal, desired_goal, info) -> Union[bool, np.ndarray]:
         """Truncation is decided by the time limit alone: ``False`` everywhere."""
         a = np.asarray(achieved_goal)
         shape = a.shape[: a.ndim - self._goal_ndim]
         return False if shape == () else np.zeros(shape, dtype=bool)
 
     # ----------------------------------------------------------------- rendering
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to gymnasium.make")
-            return None
-        if self._renderer is None:
-            self._renderer = TopDownRenderer(self.scenario.field, agent_radius=self.scenario.agent_radius)
-        img = self._renderer.render(
-            self._pos[None], goals=self._goal[None], trails=[np.array(self._trail)],
-            waypoints=[self._waypoints] if self._waypoints is not None else None,
+    def render(self) -> Optional[np.ndarray]:
+        """The top-down frame (``rgb_array``), or ``None`` after showing it (``human``)."""
+        if self.render_mode is not None and self._world is None:
+            raise RuntimeError("call reset() before render()")
+        return self._draw(
+            self._pos[None], self._goal[None], [np.array(self._trail)],
+            [self._waypoints] if self._waypoints is not None else None,
         )
-        if self._window is not None:
-            self._window.show(img)
-            return None
-        return img
-
-    def close(self):
-        if self._window is not None:
-            self._window.close()
-            self._window = None
-        self._renderer = None
 
 
 __all__ = ["SafeNavigationEnv", "check_action"]

@@ -14,15 +14,11 @@ deterministic, rebuilding it is (same start + same actions = same trajectory, bi
 """
 from __future__ import annotations
 
-from typing import List, Sequence, Set, Tuple
+from typing import Callable, List, Sequence, Set, Tuple, Union
 
 import numpy as np
 import pymunk
-
-try:  # batched body access (pymunk >= 6.6); without it the bodies are read one by one
-    from pymunk import batch as _batch
-except ImportError:  # pragma: no cover - older pymunk
-    _batch = None
+from pymunk import batch as _batch  # batched body access (pymunk >= 6.6, a declared requirement)
 
 Box = Tuple[float, float, float, float]
 
@@ -67,20 +63,20 @@ class World:
         self._wall_lo = np.array([b[:2] for b in walls], dtype=np.float64)
         self._wall_hi = np.array([b[2:] for b in walls], dtype=np.float64)
         for x0, y0, x1, y1 in walls:
-            shape = pymunk.Poly(space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            shape.elasticity = 0.0
-            shape.friction = 0.0
-            space.add(shape)
+            wall = pymunk.Poly(space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            wall.elasticity = 0.0
+            wall.friction = 0.0
+            space.add(wall)
         self.bodies: List[pymunk.Body] = []
         for i, (x, y) in enumerate(np.asarray(positions, dtype=np.float64).reshape(-1, 2)):
             body = pymunk.Body(1.0, float("inf"))
             body.position = (float(x), float(y))
-            shape = pymunk.Circle(body, self.agent_radius)
-            shape.elasticity = 0.0
-            shape.friction = 0.0
-            shape.collision_type = _AGENT_TYPE
-            shape.agent_index = i  # type: ignore[attr-defined]
-            space.add(body, shape)
+            disc = pymunk.Circle(body, self.agent_radius)
+            disc.elasticity = 0.0
+            disc.friction = 0.0
+            disc.collision_type = _AGENT_TYPE
+            disc.agent_index = i  # read back in _record_contact
+            space.add(body, disc)
             self.bodies.append(body)
         self.parked = np.zeros(len(self.bodies), dtype=bool)
         self._contacts: Set[Tuple[int, int]] = set()
@@ -92,7 +88,7 @@ class World:
         # With many agents, setting velocities and reading positions body by body dominates
         # the step; pymunk's batch API does both for all bodies in one call each (its fixed
         # overhead only pays off from a few agents on).
-        self._batched = _batch is not None and len(self.bodies) >= _BATCH_MIN_AGENTS
+        self._batched = len(self.bodies) >= _BATCH_MIN_AGENTS
         if self._batched:
             self._get_buf = _batch.Buffer()
             self._set_buf = _batch.Buffer()
@@ -118,7 +114,7 @@ class World:
 
     def _record_contact(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
         a, b = arbiter.shapes
-        i, j = a.agent_index, b.agent_index  # type: ignore[attr-defined]
+        i, j = a.agent_index, b.agent_index
         pair = (i, j) if i < j else (j, i)
         self._contacts.add(pair)
         self._recent.add(pair)
@@ -161,6 +157,7 @@ class World:
         trace = np.empty((self.substeps, n, 2), dtype=np.float64)
         self._contacts = set()
         space, dt = self.space, self._dt
+        read: Callable[[], Union[np.ndarray, List[pymunk.Vec2d]]]
         if self._batched:
             buf, fields, set_bodies = self._set_buf, _batch.BodyFields.VELOCITY, _batch.set_space_bodies
             self._vel[self._rows] = np.where(self.parked[:, None], 0.0, vel)
@@ -185,8 +182,10 @@ class World:
                 for body, _ in moving:
                     body.velocity = (0.0, 0.0)
 
-            def read() -> List[Tuple[float, float]]:
-                return [tuple(body.position) for body in bodies]
+            def read_bodies() -> List[pymunk.Vec2d]:
+                return [body.position for body in bodies]
+
+            read = read_bodies
 
         for s in range(self.substeps):
             push()

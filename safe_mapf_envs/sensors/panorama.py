@@ -27,6 +27,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from ..checks import show
 from ..rendering import PALETTE
 from .scene import Material, Scene
 
@@ -60,9 +61,9 @@ _ALLOCATOR_SETTLED = False
 
 
 def _agent_materials(i: int) -> Tuple[Material, Material]:
-    col = tuple(int(c) for c in PALETTE[i % len(PALETTE)])
-    light = tuple(int(min(255, c * 0.6 + 102)) for c in col)
-    return Material(col, band=0.25, band_contrast=0.25), Material(light)
+    r, g, b = (int(c) for c in PALETTE[i % len(PALETTE)])
+    light = (int(min(255, r * 0.6 + 102)), int(min(255, g * 0.6 + 102)), int(min(255, b * 0.6 + 102)))
+    return Material((r, g, b), band=0.25, band_contrast=0.25), Material(light)
 
 
 class PanoramaSensor:
@@ -92,17 +93,18 @@ class PanoramaSensor:
         max_range: Optional[float] = None,
     ) -> None:
         if int(image_size) != image_size or image_size < 2:
-            raise ValueError(f"image_size must be an integer >= 2, got {image_size!r}")
+            raise ValueError(f"image_size must be an integer >= 2, got {show(image_size)}")
         if not np.isfinite(fov) or not (0 < fov < 180):
-            raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+            raise ValueError(f"fov must be in (0, 180) degrees, got {show(fov)}")
         hc = scene.camera_height if camera_height is None else float(camera_height)
         if not (0 < hc < scene.ceiling_height):
             raise ValueError(
-                f"camera_height must lie strictly between 0 and the ceiling height {scene.ceiling_height:g}, got {hc!r}"
+                f"camera_height must lie strictly between 0 and the ceiling height {scene.ceiling_height:g}, "
+                f"got {show(hc)}"
             )
         rng = scene.max_range if max_range is None else float(max_range)
         if not np.isfinite(rng) or rng <= 0:
-            raise ValueError(f"max_range must be a positive number, got {max_range!r}")
+            raise ValueError(f"max_range must be a positive number, got {show(max_range)}")
         _settle_allocator()
         self.scene = scene
         self.image_size = n = int(image_size)
@@ -200,13 +202,13 @@ class PanoramaSensor:
             raise ValueError(f"positions must have shape (N, 2) with N >= 1, or (2,), got shape {p.shape}")
         p = p.reshape(-1, 2)
         if not np.all(np.isfinite(p)):
-            raise ValueError(f"positions must be finite, got {positions!r}")
+            raise ValueError(f"positions must be finite, got {show(positions)}")
         if agents is not None:
             agents = np.asarray(agents, dtype=np.float64)
             if agents.size and (agents.ndim != 2 or agents.shape[1] != 2 or not np.all(np.isfinite(agents))):
                 raise ValueError(f"agents must be finite positions of shape (M, 2), got shape {agents.shape}")
             if agents.size and not (np.isfinite(agent_radius) and agent_radius > 0):
-                raise ValueError(f"agent_radius must be a positive number to draw agents, got {agent_radius!r}")
+                raise ValueError(f"agent_radius must be a positive number to draw agents, got {show(agent_radius)}")
         out = self._render(p.astype(np.float32), agents, agent_radius, self_index, agent_colours)
         return out[0] if single else out
 

@@ -17,6 +17,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..checks import show
+
 Box = Tuple[float, float, float, float]
 Colour = Tuple[int, int, int]
 
@@ -140,14 +142,14 @@ class Scene:
     ) -> None:
         w, h = float(size[0]), float(size[1])
         if not (np.isfinite(w) and np.isfinite(h) and w > 0 and h > 0):
-            raise ValueError(f"scene size must be two positive numbers, got {size!r}")
+            raise ValueError(f"scene size must be two positive numbers, got {show(size)}")
         for what, val in (("ceiling_height", ceiling_height), ("max_range", max_range), ("agent_height", agent_height)):
             if not np.isfinite(val) or val <= 0:
-                raise ValueError(f"{what} must be a positive number, got {val!r}")
+                raise ValueError(f"{what} must be a positive number, got {show(val)}")
         if not (0 < camera_height < ceiling_height):
             raise ValueError(
                 f"camera_height must lie strictly between 0 and the ceiling height {ceiling_height:g}, "
-                f"got {camera_height!r}"
+                f"got {show(camera_height)}"
             )
         self.name = name
         self.size = (w, h)
@@ -325,7 +327,10 @@ def grid_scene(layout, zones: int = 3) -> Scene:
             rooms.append(Room(box, floor, _scaled(GRID_WALLS[k % len(GRID_WALLS)], unit), name=f"zone{k}"))
             k += 1
     wall = Material((128, 128, 128))
-    boxes = [SceneBox(tuple(map(float, b)), 1e9, wall, wall, room_coloured=True) for b in layout.boxes()]
+    boxes = [
+        SceneBox((float(x0), float(y0), float(x1), float(y1)), 1e9, wall, wall, room_coloured=True)
+        for x0, y0, x1, y1 in layout.boxes()
+    ]
     return Scene(
         (w, h), boxes, rooms,
         ceiling_height=2.5 * unit, camera_height=1.2 * unit, max_range=float(np.hypot(w, h)),
@@ -339,7 +344,9 @@ def scene_for_layout(layout) -> Scene:
     if callable(make):
         scene = make()
         if not isinstance(scene, Scene):
-            raise TypeError(f"layout {getattr(layout, 'name', layout)!r}: scene() must return a Scene, got {type(scene)}")
+            raise TypeError(
+                f"layout {getattr(layout, 'name', layout)!r}: scene() must return a Scene, got {type(scene)}"
+            )
         return scene
     return grid_scene(layout)
 

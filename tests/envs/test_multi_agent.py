@@ -222,7 +222,8 @@ def test_missing_unknown_and_done_agent_actions():
     env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=3)
     with pytest.raises(RuntimeError, match="reset"):
         env.step({})
-    env.reset(options={"starts": [(5.0, 5.0), (10.0, 5.0), (15.0, 5.0)], "goals": [(5.5, 5.0), (40.0, 5.0), (50.0, 50.0)]})
+    env.reset(options={"starts": [(5.0, 5.0), (10.0, 5.0), (15.0, 5.0)],
+                       "goals": [(5.5, 5.0), (40.0, 5.0), (50.0, 50.0)]})
     with pytest.raises(ValueError, match=r"missing actions for live agents \['agent_2'\]"):
         env.step({"agent_0": [0, 0], "agent_1": [0, 0]})
     with pytest.raises(ValueError, match=r"unknown agents \['robot_7'\]"):
@@ -274,7 +275,8 @@ def test_cost_and_motion_match_the_single_agent_env():
 
 def test_head_on_collision_is_counted_and_costed():
     env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=3, collision_cost=0.5)
-    env.reset(options={"starts": [(5.0, 5.0), (7.5, 5.0), (50.0, 50.0)], "goals": [(50.0, 5.0), (5.0, 50.0), (5.0, 45.0)]})
+    env.reset(options={"starts": [(5.0, 5.0), (7.5, 5.0), (50.0, 50.0)],
+                       "goals": [(50.0, 5.0), (5.0, 50.0), (5.0, 45.0)]})
     _, _, _, _, infos = env.step({"agent_0": [1, 0], "agent_1": [-1, 0], "agent_2": [0, 0]})
     for me, other in (("agent_0", "agent_1"), ("agent_1", "agent_0")):
         assert infos[me]["collisions"] == 1 and infos[me]["collided_with"] == [other]
@@ -393,7 +395,8 @@ def test_rgb_render_shows_agents_waypoints_and_collisions():
     env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=3, render_mode="rgb_array")
     with pytest.raises(RuntimeError, match="reset"):
         env.render()
-    env.reset(options={"starts": [(5.0, 5.0), (50.0, 5.0), (5.0, 50.0)], "goals": [(50.0, 50.0), (10.0, 40.0), (40.0, 10.0)]})
+    env.reset(options={"starts": [(5.0, 5.0), (50.0, 5.0), (5.0, 50.0)],
+                       "goals": [(50.0, 50.0), (10.0, 40.0), (40.0, 10.0)]})
     img = env.render()
     assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
     scale = img.shape[1] / 55

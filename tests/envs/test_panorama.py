@@ -131,7 +131,8 @@ def brute_force_depth(scene, sensor, p, agents=(), radius=0.0):
             tin, tout = (b - root) / a, (b + root) / a
             for t in (tin, np.where(v < 0, (scene.agent_height - hc) / v, np.inf)):
                 z = hc + v * t
-                ok = (disc > 0) & (t >= tin - 1e-9) & (t <= tout + 1e-9) & (z >= -1e-9) & (z <= scene.agent_height + 1e-9)
+                ok = (disc > 0) & (t >= tin - 1e-9) & (t <= tout + 1e-9)
+                ok &= (z >= -1e-9) & (z <= scene.agent_height + 1e-9)
                 best = np.where(ok & (t > 0) & (t < best), t, best)
     return best.reshape(4, S, S)
 

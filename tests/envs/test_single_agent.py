@@ -7,7 +7,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-import safe_mapf_envs
 from safe_mapf_envs import ENV_SPECS, SafetyGymnasiumStyle
 from safe_mapf_envs.cost import ObstacleField
 
@@ -180,7 +179,7 @@ def test_out_of_range_action_is_clipped():
         ({"start": (1.0, 2.0, 3.0)}, "pair"),
         ({"goal_distance": (10.0, 5.0)}, "band"),
         ({"goal_distance": (500.0, 600.0)}, "no free goal"),
-        ({"teleport": True}, "unknown reset options"),
+        ({"start": (5.0 + 1j, 5.0)}, "real"),
     ],
 )
 def test_bad_reset_options_raise(options, match):
