@@ -12,7 +12,12 @@ Names are imported lazily, so ``import agents.search`` does not pull in torch.
 from __future__ import annotations
 
 import importlib
+import sys
 from typing import Any
+
+# whether torch was imported before this package (agents.threads then cannot read torch's
+# start-up thread count and estimates it)
+_TORCH_PRELOADED = "torch" in sys.modules
 
 _EXPORTS = {
     "SafeGoalTD3": "agents.algorithm",
@@ -24,7 +29,9 @@ _EXPORTS = {
     "OracleSampler": "agents.self_sampling",
     "UniformSampler": "agents.self_sampling",
     "ProblemResetWrapper": "agents.self_sampling",
+    "ProblemSamplingCallback": "agents.self_sampling",
     "load_pretrained": "agents.pretrained",
+    "inference_threads": "agents.threads",
     "pretrained_path": "agents.pretrained",
     "evaluate_agent": "agents.evaluation",
     "TrainConfig": "agents.training",

@@ -619,6 +619,7 @@ class SafeGoalPolicy(BasePolicy):
         quantities: Sequence[str] = ("distance", "cost"),
         aggregate: str = "max",
         chunk_size: int = 2048,
+        progress: Optional[bool] = None,
     ) -> Dict[str, np.ndarray]:
         """Distance and/or cost from every ``obs_a[i]`` to every ``obs_b[j]``: ``(N, M)`` float32 arrays.
 
@@ -628,7 +629,9 @@ class SafeGoalPolicy(BasePolicy):
         small layers. The actor's action for a pair is computed once and shared by both
         critics. Pairs are processed in blocks of about ``chunk_size`` (memory stays bounded
         and the working set stays in cache), without gradients. With ``aggregate="none"`` the
-        arrays are ``(E, N, M)``.
+        arrays are ``(E, N, M)``. ``progress``: a ``tqdm`` bar over the blocks: ``None`` shows
+        it on a terminal once the build has run 2 s (short builds never show one), ``True``
+        always, ``False`` never.
         """
         self._check_quantities(quantities)
         if aggregate not in AGGREGATES:
@@ -656,10 +659,13 @@ class SafeGoalPolicy(BasePolicy):
         views = {q: th.from_numpy(v) for q, v in out.items()}
         cols = min(m, int(chunk_size))
         rows = max(1, int(chunk_size) // max(cols, 1))
+        bar = _pair_progress(n * m, progress)
         for j0 in range(0, m, cols):
             j1 = min(m, j0 + cols)
             for i0 in range(0, n, rows):
                 i1 = min(n, i0 + rows)
+                if bar is not None:
+                    bar.update((i1 - i0) * (j1 - j0))
                 actions = th.tanh(_pair_head(self.actor.mu, actor_parts, i0, i1, j0, j1))  # (1, P, A)
                 for q, c in critics.items():
                     v = c.expected(_pair_head(c.head, critic_parts[q], i0, i1, j0, j1, actions))  # (E, P)
@@ -668,7 +674,21 @@ class SafeGoalPolicy(BasePolicy):
                         views[q][:, i0:i1, j0:j1] = v.reshape(c.n_members, i1 - i0, j1 - j0)
                     else:
                         views[q][i0:i1, j0:j1] = v.reshape(i1 - i0, j1 - j0)
+        if bar is not None:
+            bar.close()
         return out
+
+
+def _pair_progress(total: int, progress: Optional[bool]):
+    """A ``tqdm`` bar over ``total`` pairs, or ``None`` for ``progress=False`` (see ``pairwise``)."""
+    if progress is False:
+        return None
+    from tqdm.auto import tqdm
+
+    if progress is None:  # only on a terminal, and only once the build has taken 2 s
+        return tqdm(total=total, unit="pair", unit_scale=True, desc="pairwise", delay=2.0, disable=None,
+                    mininterval=0.5, leave=False)
+    return tqdm(total=total, unit="pair", unit_scale=True, desc="pairwise", mininterval=0.5)
 
 
 def _encode_chunked(fe: GoalPairExtractor, x: th.Tensor, chunk: int = 1024) -> th.Tensor:
