@@ -97,7 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
     g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
-    g.add_argument("--tensorboard", dest="tensorboard_log", default=None, help="write TensorBoard event files to this folder")
+    g.add_argument("--tensorboard", dest="tensorboard_log", default=None,
+                   help="write TensorBoard event files to this folder")
     g.add_argument("--verbose", type=int, default=d.verbose)
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
