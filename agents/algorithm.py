@@ -48,7 +48,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
 from .distributional import categorical_projection, shift_distance_target
 from .lagrangian import LagrangeMultiplier
-from .policies import SafeGoalPolicy, aggregate_ensemble
+from .policies import CategoricalCritic, GoalActor, SafeGoalPolicy, aggregate_ensemble
 from .self_sampling import ProblemResetWrapper, ProblemSampler, find_wrappers, install_sampler, make_sampler
 from .threads import inference_threads, torch_threads
 
@@ -67,7 +67,7 @@ class TqdmProgressBar(BaseCallback):
 
     def __init__(self) -> None:
         super().__init__()
-        self.pbar = None
+        self.pbar: Any = None  # a tqdm bar while training
 
     def _on_training_start(self) -> None:
         from tqdm.auto import tqdm
@@ -165,6 +165,12 @@ class SafeGoalTD3(OffPolicyAlgorithm):
     policy_aliases: ClassVar[Dict[str, Type[BasePolicy]]] = {"MultiInputPolicy": SafeGoalPolicy}
     policy: SafeGoalPolicy
     replay_buffer: GoalCostReplayBuffer
+    actor: GoalActor
+    actor_target: GoalActor
+    critic: CategoricalCritic
+    critic_target: CategoricalCritic
+    cost_critic: CategoricalCritic
+    cost_critic_target: CategoricalCritic
 
     def __init__(
         self,
@@ -217,7 +223,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             try:
                 from torch.utils.tensorboard import SummaryWriter  # noqa: F401
             except ImportError:
-                warnings.warn("tensorboard is not installed: TensorBoard logging is disabled")
+                warnings.warn("tensorboard is not installed: TensorBoard logging is disabled", stacklevel=2)
                 tensorboard_log = None
         for name, v in (("policy_delay", policy_delay), ("target_update_interval", target_update_interval),
                         ("lagrange_update_episodes", lagrange_update_episodes)):
@@ -230,7 +236,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         if actor_aggregate not in ("mean", "max", "min"):
             raise ValueError(f"actor_aggregate must be 'mean', 'max' or 'min', got {actor_aggregate!r}")
         super().__init__(
-            policy, env, learning_rate, buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
+            policy, env, learning_rate,  # type: ignore[arg-type]  # load() builds the model without an env buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
             gradient_steps, action_noise=action_noise, replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs, optimize_memory_usage=False, policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size, tensorboard_log=tensorboard_log, verbose=verbose, device=device,
@@ -571,7 +577,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         return ["policy", "actor.optimizer", "critic.optimizer", "cost_critic.optimizer"], []
 
     @classmethod
-    def load(  # type: ignore[override]
+    def load(
         cls: Type[SelfSafeGoalTD3],
         path: Union[str, pathlib.Path, io.BufferedIOBase],
         env: Optional[GymEnv] = None,
@@ -618,7 +624,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         except Exception as exc:  # unpickling or torch deserialisation errors
             if "zip-file" in str(exc):  # SB3 reports a bad zip as ValueError
                 raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip)") from exc
-            raise CheckpointError(f"{name}: could not deserialise the checkpoint ({type(exc).__name__}: {exc})") from exc
+            raise CheckpointError(f"{name}: could not deserialise the checkpoint "
+                                  f"({type(exc).__name__}: {exc})") from exc
         if data is None:
             raise CheckpointError(f"{name} has no 'data' entry (not an SB3 checkpoint, or incomplete)")
         missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]

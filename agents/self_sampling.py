@@ -29,7 +29,7 @@ for image observations, else ``normalize(states)`` (the vector observation of a 
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import gymnasium as gym
 import numpy as np
@@ -57,7 +57,11 @@ def observations_at(env: gym.Env, states: np.ndarray) -> np.ndarray:
 
 
 def _check_band(band: Band, name: str) -> Tuple[float, float]:
-    lo, hi = (float(band), float(band)) if np.isscalar(band) else (float(band[0]), float(band[1]))
+    if np.isscalar(band):
+        lo = hi = float(cast(float, band))
+    else:
+        pair = cast(Sequence[float], band)
+        lo, hi = float(pair[0]), float(pair[1])
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo < 0 or hi < lo:
         raise ValueError(f"{name} must be a number >= 0 or a band (lo, hi) with 0 <= lo <= hi, got {band!r}")
     return lo, hi
@@ -196,13 +200,13 @@ class SelfSampler(ProblemSampler):
 
     def refill(self, env: gym.Env) -> None:
         """Draw ``N`` candidate pairs, keep the best ``K`` as the next training problems."""
-        u = env.unwrapped
+        u: Any = env.unwrapped  # the project's env: sample_states
         n = self.n_candidates
         starts = np.asarray(u.sample_states(n, self.rng))
         goals = np.asarray(u.sample_states(n, self.rng))
         by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
         n_cost = 0 if by_cost is None else int(round(self.cost_fraction * self.n_keep))
-        chosen = np.argpartition(by_cost, n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
+        chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
         rest = by_distance.copy()
         rest[chosen] = np.inf
         n_rest = self.n_keep - n_cost
@@ -211,7 +215,7 @@ class SelfSampler(ProblemSampler):
         keep = chosen[self.rng.permutation(len(chosen))]
         self._pool = [(starts[i], goals[i]) for i in keep]
         self.n_refills += 1
-        if self.last_distance is not None:
+        if self.last_distance is not None and self.last_cost is not None:
             self._stats = {"sampler/pred_distance": float(self.last_distance[keep].mean()),
                            "sampler/pred_cost": float(self.last_cost[keep].mean())}
 

@@ -19,7 +19,7 @@ import platform
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -200,8 +200,10 @@ def build_model(cfg: TrainConfig):
     from .policies import is_image_space
 
     env = gym.make(cfg.env_id)
-    image = is_image_space(env.observation_space["observation"])
-    noise = NormalActionNoise(np.zeros(env.action_space.shape), cfg.action_noise * np.ones(env.action_space.shape))
+    obs_space = cast(gym.spaces.Dict, env.observation_space)
+    image = is_image_space(obs_space["observation"])
+    shape = cast(Tuple[int, ...], env.action_space.shape)
+    noise = NormalActionNoise(np.zeros(shape), cfg.action_noise * np.ones(shape))
     sampler_kwargs = _sampler_kwargs(cfg)
     constrained = cfg.stage == "constrained"
     lagrange: Dict[str, Any] = {}
