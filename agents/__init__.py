@@ -5,7 +5,10 @@ Learning (this package's top level):
 - :class:`SafeGoalTD3`: the Stable-Baselines3 algorithm (distance and cost critics, Lagrangian
   fine-tuning, self-sampling), with ``distance``, ``cost``, ``pairwise_distance`` and
   ``pairwise_cost`` for planners;
-- :func:`load_pretrained`: the checkpoints shipped with the package.
+- :func:`load_pretrained`: the checkpoints shipped with the package;
+- :class:`ProblemSamplingCallback`: a problem sampler for ``learn(callback=...)``;
+- :func:`inference_threads`: the CPU threads of critic queries (one by default, see
+  :mod:`agents.threads`).
 
 Names are imported lazily, so ``import agents.search`` does not pull in torch.
 """

@@ -236,7 +236,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         if actor_aggregate not in ("mean", "max", "min"):
             raise ValueError(f"actor_aggregate must be 'mean', 'max' or 'min', got {actor_aggregate!r}")
         super().__init__(
-            policy, env, learning_rate,  # type: ignore[arg-type]  # load() builds the model without an env buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
+            policy, env,  # type: ignore[arg-type]  # load() builds the model without an env
+            learning_rate, buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
             gradient_steps, action_noise=action_noise, replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs, optimize_memory_usage=False, policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size, tensorboard_log=tensorboard_log, verbose=verbose, device=device,
