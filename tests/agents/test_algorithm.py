@@ -304,3 +304,10 @@ def test_tensorboard_writes_an_event_file(tmp_path):
     model.learn(60, log_interval=1, tb_log_name="tiny")
     events = list(tmp_path.rglob("events.out.tfevents.*"))
     assert events and events[0].stat().st_size > 0
+
+
+def test_constructor_settings_reach_the_base_class():
+    m = small_model(buffer_size=1234, learning_starts=7, batch_size=9, tau=0.3, train_freq=2, gradient_steps=3)
+    got = (m.buffer_size, m.learning_starts, m.batch_size, m.tau, m.gamma, m.gradient_steps)
+    assert got == (1234, 7, 9, 0.3, 1.0, 3)
+    assert m.train_freq.frequency == 2 and m.replay_buffer.buffer_size == 1234
