@@ -23,6 +23,7 @@ restored afterwards, so training and user code are unaffected.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 from typing import Iterator, Optional, Set, Tuple
@@ -43,6 +44,7 @@ _STARTUP_THREADS: Optional[int] = (torch.get_num_threads()
                                    else None)
 
 
+@functools.lru_cache(maxsize=1)
 def _physical_cores() -> int:
     """Physical cores this process may run on (torch's default thread count), else logical CPUs."""
     try:
