@@ -5,14 +5,22 @@ Learning (this package's top level):
 - :class:`SafeGoalTD3`: the Stable-Baselines3 algorithm (distance and cost critics, Lagrangian
   fine-tuning, self-sampling), with ``distance``, ``cost``, ``pairwise_distance`` and
   ``pairwise_cost`` for planners;
-- :func:`load_pretrained`: the checkpoints shipped with the package.
+- :func:`load_pretrained`: the checkpoints shipped with the package;
+- :class:`ProblemSamplingCallback`: a problem sampler for ``learn(callback=...)``;
+- :func:`inference_threads`: the CPU threads of critic queries (one by default, see
+  :mod:`agents.threads`).
 
 Names are imported lazily, so ``import agents.search`` does not pull in torch.
 """
 from __future__ import annotations
 
 import importlib
+import sys
 from typing import Any
+
+# whether torch was imported before this package (agents.threads then cannot read torch's
+# start-up thread count and estimates it)
+_TORCH_PRELOADED = "torch" in sys.modules
 
 _EXPORTS = {
     "SafeGoalTD3": "agents.algorithm",
@@ -24,7 +32,9 @@ _EXPORTS = {
     "OracleSampler": "agents.self_sampling",
     "UniformSampler": "agents.self_sampling",
     "ProblemResetWrapper": "agents.self_sampling",
+    "ProblemSamplingCallback": "agents.self_sampling",
     "load_pretrained": "agents.pretrained",
+    "inference_threads": "agents.threads",
     "pretrained_path": "agents.pretrained",
     "evaluate_agent": "agents.evaluation",
     "TrainConfig": "agents.training",

@@ -22,6 +22,7 @@ Reinforcement Learning", built on Search on the Replay Buffer (SoRB):
 """
 from __future__ import annotations
 
+import inspect
 import io
 import pathlib
 import warnings
@@ -42,15 +43,14 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import FloatSchedule, polyak_update, safe_mean, update_learning_rate
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
-
-import safe_mapf_envs  # noqa: F401  (registers the environment ids)
+from stable_baselines3.common.vec_env import VecEnv
 
 from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
 from .distributional import categorical_projection, shift_distance_target
 from .lagrangian import LagrangeMultiplier
-from .policies import SafeGoalPolicy, aggregate_ensemble
-from .self_sampling import ProblemResetWrapper, ProblemSampler, UniformSampler, find_wrappers, make_sampler
+from .policies import CategoricalCritic, GoalActor, SafeGoalPolicy, aggregate_ensemble
+from .self_sampling import ProblemResetWrapper, ProblemSampler, find_wrappers, install_sampler, make_sampler
+from .threads import inference_threads, torch_threads
 
 SelfSafeGoalTD3 = TypeVar("SelfSafeGoalTD3", bound="SafeGoalTD3")
 
@@ -67,7 +67,7 @@ class TqdmProgressBar(BaseCallback):
 
     def __init__(self) -> None:
         super().__init__()
-        self.pbar = None
+        self.pbar: Any = None  # a tqdm bar while training
 
     def _on_training_start(self) -> None:
         from tqdm.auto import tqdm
@@ -165,6 +165,12 @@ class SafeGoalTD3(OffPolicyAlgorithm):
     policy_aliases: ClassVar[Dict[str, Type[BasePolicy]]] = {"MultiInputPolicy": SafeGoalPolicy}
     policy: SafeGoalPolicy
     replay_buffer: GoalCostReplayBuffer
+    actor: GoalActor
+    actor_target: GoalActor
+    critic: CategoricalCritic
+    critic_target: CategoricalCritic
+    cost_critic: CategoricalCritic
+    cost_critic_target: CategoricalCritic
 
     def __init__(
         self,
@@ -210,12 +216,14 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         if env_id is None:
             env_id = env if isinstance(env, str) else getattr(getattr(env, "spec", None), "id", None)
         if isinstance(env, str):
+            import safe_mapf_envs  # noqa: F401  (registers the environment ids)
+
             env = gym.make(env)
         if tensorboard_log is not None:
             try:
                 from torch.utils.tensorboard import SummaryWriter  # noqa: F401
             except ImportError:
-                warnings.warn("tensorboard is not installed: TensorBoard logging is disabled")
+                warnings.warn("tensorboard is not installed: TensorBoard logging is disabled", stacklevel=2)
                 tensorboard_log = None
         for name, v in (("policy_delay", policy_delay), ("target_update_interval", target_update_interval),
                         ("lagrange_update_episodes", lagrange_update_episodes)):
@@ -228,7 +236,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         if actor_aggregate not in ("mean", "max", "min"):
             raise ValueError(f"actor_aggregate must be 'mean', 'max' or 'min', got {actor_aggregate!r}")
         super().__init__(
-            policy, env, learning_rate, buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
+            policy, env,  # type: ignore[arg-type]  # load() builds the model without an env
+            learning_rate, buffer_size, learning_starts, batch_size, tau, 1.0, train_freq,
             gradient_steps, action_noise=action_noise, replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs, optimize_memory_usage=False, policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size, tensorboard_log=tensorboard_log, verbose=verbose, device=device,
@@ -309,26 +318,11 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         self._sampler = make_sampler(sampler, **kwargs)
 
     def _attach_sampler(self) -> None:
-        if self.env is None or self._sampler is None:
-            return
-        if not isinstance(self.env, DummyVecEnv):
-            if isinstance(self._sampler, UniformSampler):
-                return
-            raise ValueError(f"the {self._sampler.name!r} problem sampler needs a DummyVecEnv (it runs in this "
-                             f"process), got {type(self.env).__name__}")
-        wrappers = [w for e in self.env.envs for w in find_wrappers(e)]
-        if not wrappers and not isinstance(self._sampler, UniformSampler):
-            raise ValueError("the environment has no ProblemResetWrapper; wrap it with "
-                             "agents.self_sampling.ProblemResetWrapper to use the "
-                             f"{self._sampler.name!r} problem sampler")
-        self._sampler.bind(self)
-        for w in wrappers:
-            w.sampler = self._sampler
-
-    def _setup_learn(self, total_timesteps: int, callback: MaybeCallback = None, reset_num_timesteps: bool = True,
-                     tb_log_name: str = "run", progress_bar: bool = False) -> Tuple[int, BaseCallback]:
-        self._attach_sampler()
-        return super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+        """Connect the model's own problem sampler to the training environment's
+        :class:`~agents.self_sampling.ProblemResetWrapper` layers (before the first reset of a
+        ``learn`` call, so that every episode of the call is a sampled problem)."""
+        if self.env is not None and self._sampler is not None:
+            install_sampler(self.env, self._sampler, self)
 
     def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
         if isinstance(callback, list):
@@ -344,6 +338,13 @@ class SafeGoalTD3(OffPolicyAlgorithm):
     def learn(self: SelfSafeGoalTD3, total_timesteps: int, callback: MaybeCallback = None, log_interval: int = 10,
               tb_log_name: str = "SafeGoalTD3", reset_num_timesteps: bool = True,
               progress_bar: bool = False) -> SelfSafeGoalTD3:
+        """Train for ``total_timesteps`` environment steps (SB3's ``learn``).
+
+        The model's problem sampler (``problem_sampler``) chooses every episode of the call,
+        the first included; a :class:`~agents.self_sampling.ProblemSamplingCallback` in
+        ``callback`` replaces it from the next episode on.
+        """
+        self._attach_sampler()
         return super().learn(total_timesteps=total_timesteps, callback=callback, log_interval=log_interval,
                              tb_log_name=tb_log_name, reset_num_timesteps=reset_num_timesteps,
                              progress_bar=progress_bar)
@@ -512,34 +513,55 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         super().dump_logs()
 
     # ------------------------------------------------------------------ critics as functions
-    def distance(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max") -> np.ndarray:
+    # CPU threads of these queries: the ``threads`` argument, else $SAFE_MAPF_INFERENCE_THREADS,
+    # else torch's setting where the user chose it, else one (see :mod:`agents.threads`).
+    def distance(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max",
+                 threads: Optional[int] = None) -> np.ndarray:
         """Predicted steps from ``obs[i]`` to ``goal[i]`` (expected value of the distance distribution).
 
         ``obs``/``goal``: raw observations, one (``obs_shape``) or batches ``(N, *obs_shape)``;
         for the vector environments, positions divided by the world size. ``aggregate``
         combines the ensemble: ``"max"`` (pessimistic), ``"mean"``, ``"min"`` or ``"none"``
-        (``(E, N)``).
+        (``(E, N)``). ``threads``: CPU threads of the query (default: one, unless set by
+        ``SAFE_MAPF_INFERENCE_THREADS`` or ``torch.set_num_threads``; see :mod:`agents.threads`).
         """
-        return self.policy.values(obs, goal, ("distance",), aggregate)["distance"]
+        with torch_threads(inference_threads(threads)):
+            return self.policy.values(obs, goal, ("distance",), aggregate)["distance"]
 
-    def cost(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max") -> np.ndarray:
+    def cost(self, obs: np.ndarray, goal: np.ndarray, aggregate: str = "max",
+             threads: Optional[int] = None) -> np.ndarray:
         """Predicted cumulative cost from ``obs[i]`` to ``goal[i]`` (same conventions as :meth:`distance`)."""
-        return self.policy.values(obs, goal, ("cost",), aggregate)["cost"]
+        with torch_threads(inference_threads(threads)):
+            return self.policy.values(obs, goal, ("cost",), aggregate)["cost"]
 
     def pairwise_distance(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
-                          chunk_size: int = 2048) -> np.ndarray:
-        """``D[i, j]``: predicted steps from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)`` (float32)."""
-        return self.policy.pairwise(obs_a, obs_b, ("distance",), aggregate, chunk_size)["distance"]
+                          chunk_size: int = 2048, threads: Optional[int] = None,
+                          progress: Optional[bool] = None) -> np.ndarray:
+        """``D[i, j]``: predicted steps from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)`` (float32).
+
+        ``threads`` as in :meth:`distance`. ``progress``: a progress bar over the blocks of
+        pairs: ``None`` (default) shows one on a terminal once the build has run 2 s, ``True``
+        always, ``False`` never.
+        """
+        with torch_threads(inference_threads(threads)):
+            return self.policy.pairwise(obs_a, obs_b, ("distance",), aggregate, chunk_size,
+                                        progress=progress)["distance"]
 
     def pairwise_cost(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
-                      chunk_size: int = 2048) -> np.ndarray:
-        """``C[i, j]``: predicted cumulative cost from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)``."""
-        return self.policy.pairwise(obs_a, obs_b, ("cost",), aggregate, chunk_size)["cost"]
+                      chunk_size: int = 2048, threads: Optional[int] = None,
+                      progress: Optional[bool] = None) -> np.ndarray:
+        """``C[i, j]``: predicted cumulative cost from ``obs_a[i]`` to ``obs_b[j]``, shape ``(N, M)``
+        (``threads`` and ``progress`` as in :meth:`pairwise_distance`)."""
+        with torch_threads(inference_threads(threads)):
+            return self.policy.pairwise(obs_a, obs_b, ("cost",), aggregate, chunk_size, progress=progress)["cost"]
 
     def pairwise(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
-                 chunk_size: int = 2048) -> Tuple[np.ndarray, np.ndarray]:
-        """``(D, C)`` together, sharing the actor's pass over the pairs (cheaper than two calls)."""
-        out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size)
+                 chunk_size: int = 2048, threads: Optional[int] = None,
+                 progress: Optional[bool] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """``(D, C)`` together, sharing the actor's pass over the pairs (cheaper than two calls;
+        ``threads`` and ``progress`` as in :meth:`pairwise_distance`)."""
+        with torch_threads(inference_threads(threads)):
+            out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size, progress=progress)
         return out["distance"], out["cost"]
 
     # ------------------------------------------------------------------ save / load
@@ -556,7 +578,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         return ["policy", "actor.optimizer", "critic.optimizer", "cost_critic.optimizer"], []
 
     @classmethod
-    def load(  # type: ignore[override]
+    def load(
         cls: Type[SelfSafeGoalTD3],
         path: Union[str, pathlib.Path, io.BufferedIOBase],
         env: Optional[GymEnv] = None,
@@ -564,9 +586,33 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         custom_objects: Optional[Dict[str, Any]] = None,
         print_system_info: bool = False,
         force_reset: bool = True,
-        **kwargs: Any,
+        **overrides: Any,
     ) -> SelfSafeGoalTD3:
-        """Load a checkpoint; a corrupt, incomplete or mismatched file raises :class:`CheckpointError`."""
+        """Load a checkpoint, optionally with some settings changed (e.g. to fine-tune it).
+
+        ``overrides`` are constructor arguments of :class:`SafeGoalTD3` (``learning_rate``,
+        ``batch_size``, ``action_noise``, ``constrained``, ``problem_sampler``, ...) that replace
+        the stored ones before the model is set up, so the learning-rate schedules and the
+        problem sampler follow them; the networks and optimiser states are the checkpoint's.
+        ``policy_kwargs`` must equal the stored ones (the networks are fixed by the file).
+        Special cases:
+
+        - ``seed``: after the networks are loaded, the random generators (torch, numpy, the
+          environment, the action space) and the replay buffer's sampling are seeded with it,
+          so a fine-tuning run is reproducible from its seed;
+        - ``cost_limit``, ``lagrange_lr``, ``lagrange_init``, ``lagrange_max``: a new Lagrange
+          multiplier from these, the missing ones taken from the stored multiplier
+          (``lagrange_init`` from its current value).
+
+        A corrupt, incomplete or mismatched file raises :class:`CheckpointError`; an unknown
+        override raises ``TypeError``.
+        """
+        overrides = dict(overrides)
+        unknown = sorted(set(overrides) - set(_load_overrides()))
+        if unknown:
+            raise TypeError(f"{cls.__name__}.load got unknown overrides {unknown}; "
+                            f"accepted: {sorted(_load_overrides())}")
+        lagrange = {k: overrides.pop(k) for k in _LAGRANGE_OVERRIDES if k in overrides}
         name = str(path) if not isinstance(path, io.BufferedIOBase) else "<stream>"
         if isinstance(path, (str, pathlib.Path)):
             p = pathlib.Path(path)
@@ -579,7 +625,8 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         except Exception as exc:  # unpickling or torch deserialisation errors
             if "zip-file" in str(exc):  # SB3 reports a bad zip as ValueError
                 raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip)") from exc
-            raise CheckpointError(f"{name}: could not deserialise the checkpoint ({type(exc).__name__}: {exc})") from exc
+            raise CheckpointError(f"{name}: could not deserialise the checkpoint "
+                                  f"({type(exc).__name__}: {exc})") from exc
         if data is None:
             raise CheckpointError(f"{name} has no 'data' entry (not an SB3 checkpoint, or incomplete)")
         missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]
@@ -595,7 +642,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             raise CheckpointError(f"{name} is missing the parameter files {[k + '.pth' for k in absent]}")
         try:
             model = super().load(path, env=env, device=device, custom_objects=custom_objects,
-                                 print_system_info=print_system_info, force_reset=force_reset, **kwargs)
+                                 print_system_info=print_system_info, force_reset=force_reset, **overrides)
         except ValueError as exc:
             if "spaces do not match" in str(exc) or "do not match" in str(exc):
                 raise CheckpointError(f"{name} does not fit the given environment: {exc}") from exc
@@ -603,7 +650,25 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         except (RuntimeError, KeyError) as exc:
             raise CheckpointError(f"{name}: the stored networks do not match the policy architecture "
                                   f"({type(exc).__name__}: {exc})") from exc
+        if lagrange:
+            old = model.lagrangian
+            model.lagrangian = LagrangeMultiplier(
+                lagrange.get("cost_limit", old.cost_limit), lagrange.get("lagrange_lr", old.learning_rate),
+                lagrange.get("lagrange_init", old.value), lagrange.get("lagrange_max", old.max_value))
+        if overrides.get("seed") is not None:
+            model.set_random_seed(model.seed)
+            model.replay_buffer.seed(model.seed)
         return model
+
+
+#: ``load`` overrides that build a new Lagrange multiplier instead of setting an attribute
+_LAGRANGE_OVERRIDES = ("cost_limit", "lagrange_lr", "lagrange_init", "lagrange_max")
+
+
+def _load_overrides() -> List[str]:
+    """Names ``SafeGoalTD3.load`` accepts as overrides: the constructor's settings."""
+    fixed = {"self", "policy", "env", "device", "_init_setup_model", "stats_window_size"}
+    return [k for k in inspect.signature(SafeGoalTD3.__init__).parameters if k not in fixed]
 
 
 __all__ = ["CheckpointError", "SafeGoalTD3", "TqdmProgressBar"]

@@ -22,7 +22,7 @@ arrays, which environments with image goals can use to decide termination.
 from __future__ import annotations
 
 import os
-from typing import Any, Callable, Dict, List, NamedTuple, Optional
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, cast
 
 import numpy as np
 import torch as th
@@ -176,8 +176,9 @@ class GoalCostReplayBuffer(DictReplayBuffer):
             self.goal_positions = np.zeros_like(self.positions)
         if self.positions is not None:
             nan = np.full(self.positions.shape[2:], np.nan)
+            goal_positions = cast(np.ndarray, self.goal_positions)  # set together with positions
             self.positions[pos] = [info.get("position", nan) for info in infos]
-            self.goal_positions[pos] = [info.get("goal", nan) for info in infos]
+            goal_positions[pos] = [info.get("goal", nan) for info in infos]
         super().add(obs, next_obs, action, reward, done, infos)
         for e in np.flatnonzero(np.asarray(done).reshape(self.n_envs)):
             start = int(self._current_ep_start[e])
@@ -196,7 +197,7 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         same spaces (and at least the same capacity).
         """
         n = self.buffer_size if self.full else self.pos
-        arrays: Dict[str, np.ndarray] = {}
+        arrays: Dict[str, Any] = {}
         for prefix, store in (("obs", self.observations), ("next_obs", self.next_observations)):
             for k, v in store.items():
                 if not (k == "achieved_goal" and self.achieved_goal_is_observation):
@@ -204,7 +205,8 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         for k in self._STATE:
             arrays[k] = getattr(self, k)[:n]
         if self.positions is not None:
-            arrays["positions"], arrays["goal_positions"] = self.positions[:n], self.goal_positions[:n]
+            arrays["positions"] = self.positions[:n]
+            arrays["goal_positions"] = cast(np.ndarray, self.goal_positions)[:n]
         arrays["meta"] = np.array([self.pos, int(self.full), self.buffer_size, self.n_envs], dtype=np.int64)
         tmp = path + ".tmp.npz"
         np.savez(tmp, **arrays)
@@ -260,6 +262,7 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         next_obs = {k: v[t, e] for k, v in self.next_observations.items()}
         goals = obs["desired_goal"].copy()
         goal_pos = None if self.goal_positions is None else self.goal_positions[t, e].copy()
+        positions = cast(np.ndarray, self.positions)  # not None whenever goal_pos is not None
 
         u = self.rng.random(b)
         future = np.flatnonzero(u < self.her_ratio)
@@ -272,18 +275,18 @@ class GoalCostReplayBuffer(DictReplayBuffer):
             ft = (start + np.minimum(f_off, length - 1)) % self.buffer_size
             goals[future] = self.next_observations["achieved_goal"][ft, e[future]]
             if goal_pos is not None:
-                goal_pos[future] = self.positions[ft, e[future]]
+                goal_pos[future] = positions[ft, e[future]]
         if len(rand):
             valid = np.flatnonzero(self.ep_length.reshape(-1) > 0)
             rt, re = np.divmod(valid[self.rng.integers(len(valid), size=len(rand))], self.n_envs)
             goals[rand] = self.next_observations["achieved_goal"][rt, re]
             if goal_pos is not None:
-                goal_pos[rand] = self.positions[rt, re]
+                goal_pos[rand] = positions[rt, re]
 
         dones = self.dones[t, e] * (1.0 - self.timeouts[t, e])
         if len(relabelled):
-            info = {} if self.positions is None else {"position": self.positions[t[relabelled], e[relabelled]],
-                                                      "goal": goal_pos[relabelled]}
+            info = {} if goal_pos is None else {"position": positions[t[relabelled], e[relabelled]],
+                                                "goal": goal_pos[relabelled]}
             dones = dones.copy()
             dones[relabelled] = self.compute_terminated(
                 next_obs["achieved_goal"][relabelled], goals[relabelled], info)

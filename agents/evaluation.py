@@ -51,7 +51,7 @@ def sample_problems(
         raise ValueError(f"n must be >= 1, got {n}")
     if not (0 <= min_distance <= max_distance):
         raise ValueError(f"need 0 <= min_distance <= max_distance, got {min_distance}, {max_distance}")
-    u = _make_env(env).unwrapped
+    u: Any = _make_env(env).unwrapped  # the project's env: sample_states, geodesic_distance
     starts, goals, dists = [], [], []
     for _ in range(200 * n):
         s = u.sample_states(1, rng)[0]

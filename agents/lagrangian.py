@@ -12,7 +12,7 @@ with initial value 0 and learning rate 0.035).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Iterable, cast
 
 import numpy as np
 
@@ -53,7 +53,7 @@ class LagrangeMultiplier:
         if np.isscalar(episode_costs):
             costs = np.array([episode_costs], dtype=np.float64)
         else:
-            costs = np.asarray(list(episode_costs), dtype=np.float64).ravel()
+            costs = np.asarray(list(cast(Iterable[float], episode_costs)), dtype=np.float64).ravel()
         if costs.size == 0:
             raise ValueError("update() needs at least one episode cost")
         if not np.all(np.isfinite(costs)):

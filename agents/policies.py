@@ -14,7 +14,7 @@ broadcast sum plus the remaining small layers (:meth:`SafeGoalPolicy.pairwise`).
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Type
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Type, Union, cast
 
 import numpy as np
 import torch as th
@@ -87,7 +87,8 @@ class PanoramaEncoder(nn.Module):
     ) -> None:
         super().__init__()
         if len(obs_shape) not in (3, 4):
-            raise ValueError(f"PanoramaEncoder expects (views, H, W, C) or (H, W, C) observations, got shape {obs_shape}")
+            raise ValueError(f"PanoramaEncoder expects (views, H, W, C) or (H, W, C) observations, "
+                             f"got shape {obs_shape}")
         if not conv_layers:
             raise ValueError("PanoramaEncoder needs at least one convolution, got conv_layers=[]")
         self.obs_shape = tuple(int(s) for s in obs_shape)
@@ -98,7 +99,8 @@ class PanoramaEncoder(nn.Module):
         in_ch = c
         for filters, kernel, stride in conv_layers:
             if kernel > min(h, w):
-                raise ValueError(f"conv kernel {kernel} is larger than the {h}x{w} feature map of a {obs_shape} observation")
+                raise ValueError(f"conv kernel {kernel} is larger than the {h}x{w} feature map "
+                                 f"of a {obs_shape} observation")
             layers += [nn.Conv2d(in_ch, int(filters), int(kernel), stride=int(stride)), nn.ReLU()]
             in_ch = int(filters)
             h, w = (h - kernel) // stride + 1, (w - kernel) // stride + 1
@@ -132,12 +134,12 @@ class PanoramaEncoder(nn.Module):
         weight = first.weight.permute(0, 2, 3, 1).reshape(first.out_channels, k * k * c)
         if uint8 and self.scale != 1.0:
             weight = weight * self.scale
-        h = th.relu(th.addmm(first.bias, patches, weight.t())).view(n, oh, ow, first.out_channels)
-        for conv, (oh, ow) in zip(self._convs[1:], self._sizes[1:]):
+        h = th.relu(th.addmm(_bias(first), patches, weight.t())).view(n, oh, ow, first.out_channels)
+        for conv in self._convs[1:]:
             kh, kw = conv.kernel_size
             if (kh, kw) == tuple(h.shape[1:3]):  # the kernel covers the map: a linear layer
                 wt = conv.weight.permute(0, 2, 3, 1).reshape(conv.out_channels, -1)
-                h = th.relu(th.addmm(conv.bias, h.reshape(n, -1), wt.t())).view(n, 1, 1, conv.out_channels)
+                h = th.relu(th.addmm(_bias(conv), h.reshape(n, -1), wt.t())).view(n, 1, 1, conv.out_channels)
             else:
                 h = th.relu(conv(h.permute(0, 3, 1, 2))).permute(0, 2, 3, 1)
         # flatten in the (C, H, W) order of nn.Flatten on NCHW maps, as the FC layer expects
@@ -173,21 +175,24 @@ class GoalPairExtractor(BaseFeaturesExtractor):
     ) -> None:
         check_goal_space(observation_space)
         obs_space, goal_space = observation_space["observation"], observation_space["desired_goal"]
+        assert obs_space.shape is not None  # check_goal_space: Box observations
         if obs_space.shape != goal_space.shape:
             raise ValueError("observation and desired_goal must share one encoder, so they need the same shape; got "
                              f"{obs_space.shape} and {goal_space.shape}")
         if encoder == "auto":
             encoder = "cnn" if is_image_space(obs_space) else "mlp"
         if encoder == "cnn":
-            net: nn.Module = PanoramaEncoder(obs_space.shape, features_dim=features_dim, conv_layers=conv_layers,
-                                             scale=1.0 / 255.0 if obs_space.dtype == np.uint8 else 1.0)
+            scale = 1.0 / 255.0 if obs_space.dtype == np.uint8 else 1.0
+            net: Union[PanoramaEncoder, MlpEncoder] = PanoramaEncoder(
+                obs_space.shape, features_dim=features_dim, conv_layers=conv_layers, scale=scale)
         elif encoder == "mlp":
             net = MlpEncoder(int(np.prod(obs_space.shape)), net_arch)
         else:
             raise ValueError(f"encoder must be 'auto', 'mlp' or 'cnn', got {encoder!r}")
-        super().__init__(observation_space, features_dim=2 * net.output_dim)
+        code_dim = int(net.output_dim)
+        super().__init__(observation_space, features_dim=2 * code_dim)
         self.encoder = net
-        self.code_dim = net.output_dim
+        self.code_dim = code_dim
 
     def encode(self, x: th.Tensor) -> th.Tensor:
         """Codes of a batch of raw observations (or goals): ``(B, *obs_shape) -> (B, code_dim)``."""
@@ -242,9 +247,14 @@ class EnsembleHead(nn.Module):
             h = layer(self.act(h))
         return h
 
+    def linear(self, i: int) -> EnsembleLinear:
+        """The ``i``-th layer (typed)."""
+        return cast(EnsembleLinear, self.layers[i])
+
     def first_layer_parts(self, sizes: Sequence[int]) -> Tuple[List[th.Tensor], th.Tensor]:
         """The first layer's weight split into row blocks of ``sizes`` (``(E, size, hidden0)`` each) and its bias."""
-        return list(self.layers[0].weight.split(list(sizes), dim=1)), self.layers[0].bias
+        first = self.linear(0)
+        return list(first.weight.split(list(sizes), dim=1)), first.bias
 
 
 # --------------------------------------------------------------------------- actor / critics
@@ -258,6 +268,9 @@ class GoalActor(BasePolicy):
     separately by one LayerNorm, so the first layer stays linear in each code and the
     planner's pairwise matrices keep their one-encoding-per-node shortcut.
     """
+
+    features_extractor: GoalPairExtractor
+    optimizer: th.optim.Optimizer
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, net_arch: Sequence[int],
                  features_extractor: GoalPairExtractor, features_dim: int,
@@ -281,7 +294,8 @@ class GoalActor(BasePolicy):
                          features_extractor=self.features_extractor, input_norm=self.input_norm))
         return data
 
-    def extract_features(self, obs: PyTorchObs, features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
+    def extract_features(self, obs: PyTorchObs,
+                         features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
         return (features_extractor or self.features_extractor)(obs)
 
     def normalize_features(self, features: th.Tensor) -> th.Tensor:
@@ -311,6 +325,10 @@ class CategoricalCritic(BaseModel):
     logits into the expected value per member (distance in steps, or cumulative cost).
     """
 
+    features_extractor: GoalPairExtractor
+    optimizer: th.optim.Optimizer
+    support: th.Tensor
+
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, net_arch: Sequence[int],
                  features_extractor: GoalPairExtractor, features_dim: int, support: th.Tensor,
                  n_members: int = 3, activation_fn: Type[nn.Module] = nn.ReLU,
@@ -322,7 +340,8 @@ class CategoricalCritic(BaseModel):
         self.head = EnsembleHead(n_members, features_dim + self.action_dim, net_arch, len(support), activation_fn)
         self.register_buffer("support", support.clone().float())
 
-    def extract_features(self, obs: PyTorchObs, features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
+    def extract_features(self, obs: PyTorchObs,
+                         features_extractor: Optional[BaseFeaturesExtractor] = None) -> th.Tensor:
         return (features_extractor or self.features_extractor)(obs)
 
     def logits_from_features(self, features: th.Tensor, actions: th.Tensor) -> th.Tensor:
@@ -391,6 +410,10 @@ class SafeGoalPolicy(BasePolicy):
     critic_target: CategoricalCritic
     cost_critic: CategoricalCritic
     cost_critic_target: CategoricalCritic
+    encoder: GoalPairExtractor
+    encoder_target: GoalPairExtractor
+    observation_space: spaces.Dict
+    action_space: spaces.Box
 
     def __init__(
         self,
@@ -446,29 +469,34 @@ class SafeGoalPolicy(BasePolicy):
             share_encoder = is_image_space(observation_space["observation"])
         self.share_encoder = bool(share_encoder)
         self.actor_input_norm = self.share_encoder if actor_input_norm is None else bool(actor_input_norm)
-        if optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs and "foreach" not in self.optimizer_kwargs:
+        if (optimizer_class is th.optim.Adam and "fused" not in self.optimizer_kwargs
+                and "foreach" not in self.optimizer_kwargs):
             # one fused kernel per step instead of one per parameter tensor (the heads are small)
             self.optimizer_kwargs = dict(self.optimizer_kwargs, fused=True)
         self._build(lr_schedule)
 
     # ------------------------------------------------------------------ construction
+    def _make_extractor(self) -> GoalPairExtractor:
+        return cast(GoalPairExtractor, self.make_features_extractor())
+
     def _make_actor(self, fe: Optional[GoalPairExtractor] = None) -> GoalActor:
-        fe = fe if fe is not None else self.make_features_extractor()
+        fe = fe if fe is not None else self._make_extractor()
         return GoalActor(self.observation_space, self.action_space, self.pi_arch, fe, fe.features_dim,
                          self.activation_fn, input_norm=self.actor_input_norm).to(self.device)
 
     def _make_critic(self, arch: Sequence[int], support: th.Tensor, n_members: int,
                      fe: Optional[GoalPairExtractor] = None) -> CategoricalCritic:
-        fe = fe if fe is not None else self.make_features_extractor()
+        fe = fe if fe is not None else self._make_extractor()
         return CategoricalCritic(self.observation_space, self.action_space, arch, fe, fe.features_dim, support,
                                  n_members, self.activation_fn).to(self.device)
 
     def _build(self, lr_schedule: Schedule) -> None:
         lr = lr_schedule(1)
-        enc = enc_t = None
+        enc: Optional[GoalPairExtractor] = None
+        enc_t: Optional[GoalPairExtractor] = None
         if self.share_encoder:
-            enc = self.make_features_extractor().to(self.device)
-            enc_t = self.make_features_extractor().to(self.device)
+            enc = self._make_extractor().to(self.device)
+            enc_t = self._make_extractor().to(self.device)
             enc_t.load_state_dict(enc.state_dict())
             self.encoder, self.encoder_target = enc, enc_t
         self.actor = self._make_actor(enc)
@@ -481,8 +509,9 @@ class SafeGoalPolicy(BasePolicy):
         self.cost_critic_target = self._make_critic(self.qc_arch, self._cost_support, self.n_cost_critics, enc_t)
         self.cost_critic_target.load_state_dict(self.cost_critic.state_dict())
 
-        opt = lambda params: self.optimizer_class(list(params), lr=lr, **self.optimizer_kwargs)  # noqa: E731
-        if self.share_encoder:
+        optimizer_class: Any = self.optimizer_class  # any torch optimizer taking lr=
+        opt = lambda params: optimizer_class(list(params), lr=lr, **self.optimizer_kwargs)  # noqa: E731
+        if enc is not None:
             # The encoder learns from the critic losses only; its parameters sit in the distance
             # critic's optimizer, the actor's optimizer holds its head alone.
             self.actor.optimizer = opt([*self.actor.norm.parameters(), *self.actor.mu.parameters()])
@@ -551,7 +580,7 @@ class SafeGoalPolicy(BasePolicy):
     # ------------------------------------------------------------------ distances and costs
     def _as_batch(self, x: Any, what: str) -> Tuple[th.Tensor, bool]:
         """Raw observations (one or a batch) as a tensor with a batch axis; flag: was it a single one."""
-        shape = tuple(self.observation_space["observation"].shape)
+        shape = cast(Tuple[int, ...], self.observation_space["observation"].shape)
         arr = x.detach().cpu().numpy() if isinstance(x, th.Tensor) else np.asarray(x)
         if arr.shape == shape:
             arr, single = arr[None], True
@@ -619,6 +648,7 @@ class SafeGoalPolicy(BasePolicy):
         quantities: Sequence[str] = ("distance", "cost"),
         aggregate: str = "max",
         chunk_size: int = 2048,
+        progress: Optional[bool] = None,
     ) -> Dict[str, np.ndarray]:
         """Distance and/or cost from every ``obs_a[i]`` to every ``obs_b[j]``: ``(N, M)`` float32 arrays.
 
@@ -628,7 +658,9 @@ class SafeGoalPolicy(BasePolicy):
         small layers. The actor's action for a pair is computed once and shared by both
         critics. Pairs are processed in blocks of about ``chunk_size`` (memory stays bounded
         and the working set stays in cache), without gradients. With ``aggregate="none"`` the
-        arrays are ``(E, N, M)``.
+        arrays are ``(E, N, M)``. ``progress``: a ``tqdm`` bar over the blocks: ``None`` shows
+        it on a terminal once the build has run 2 s (short builds never show one), ``True``
+        always, ``False`` never.
         """
         self._check_quantities(quantities)
         if aggregate not in AGGREGATES:
@@ -656,10 +688,13 @@ class SafeGoalPolicy(BasePolicy):
         views = {q: th.from_numpy(v) for q, v in out.items()}
         cols = min(m, int(chunk_size))
         rows = max(1, int(chunk_size) // max(cols, 1))
+        bar = _pair_progress(n * m, progress)
         for j0 in range(0, m, cols):
             j1 = min(m, j0 + cols)
             for i0 in range(0, n, rows):
                 i1 = min(n, i0 + rows)
+                if bar is not None:
+                    bar.update((i1 - i0) * (j1 - j0))
                 actions = th.tanh(_pair_head(self.actor.mu, actor_parts, i0, i1, j0, j1))  # (1, P, A)
                 for q, c in critics.items():
                     v = c.expected(_pair_head(c.head, critic_parts[q], i0, i1, j0, j1, actions))  # (E, P)
@@ -668,7 +703,21 @@ class SafeGoalPolicy(BasePolicy):
                         views[q][:, i0:i1, j0:j1] = v.reshape(c.n_members, i1 - i0, j1 - j0)
                     else:
                         views[q][i0:i1, j0:j1] = v.reshape(i1 - i0, j1 - j0)
+        if bar is not None:
+            bar.close()
         return out
+
+
+def _pair_progress(total: int, progress: Optional[bool]):
+    """A ``tqdm`` bar over ``total`` pairs, or ``None`` for ``progress=False`` (see ``pairwise``)."""
+    if progress is False:
+        return None
+    from tqdm.auto import tqdm
+
+    if progress is None:  # only on a terminal, and only once the build has taken 2 s
+        return tqdm(total=total, unit="pair", unit_scale=True, desc="pairwise", delay=2.0, disable=None,
+                    mininterval=0.5, leave=False)
+    return tqdm(total=total, unit="pair", unit_scale=True, desc="pairwise", mininterval=0.5)
 
 
 def _encode_chunked(fe: GoalPairExtractor, x: th.Tensor, chunk: int = 1024) -> th.Tensor:
@@ -683,7 +732,7 @@ def _first_layer_products(codes: Tuple[th.Tensor, th.Tensor], head: EnsembleHead
     goals ``(E, M, H)`` (bias included), plus the action block of the weight (``None`` for the actor)."""
     code_a, code_b = codes
     d = code_a.shape[1]
-    in_dim = head.layers[0].weight.shape[1]
+    in_dim = head.linear(0).weight.shape[1]
     sizes = [d, d] + ([in_dim - 2 * d] if in_dim > 2 * d else [])
     (w_obs, w_goal, *w_act), bias = head.first_layer_parts(sizes)
     pre_a = th.matmul(code_a.unsqueeze(0), w_obs).contiguous()
@@ -698,14 +747,22 @@ def _pair_head(head: EnsembleHead, parts, i0: int, i1: int, j0: int, j1: int,
     e = head.n_members
     h = th.add(pre_a[:, i0:i1, None, :], pre_b[:, None, j0:j1, :]).view(e, (i1 - i0) * (j1 - j0), -1)
     if w_act is not None:
+        assert actions is not None, "the critics' heads need the actions"
         h.baddbmm_(actions.expand(e, -1, -1), w_act)
     h = _activate_(h, head.act)
-    layers = head.layers[1:]
-    for k, layer in enumerate(layers):
+    n_layers = len(head.layers)
+    for k in range(1, n_layers):
+        layer = head.linear(k)
         h = th.baddbmm(layer.bias, h, layer.weight)
-        if k < len(layers) - 1:
+        if k < n_layers - 1:
             h = _activate_(h, head.act)
     return h
+
+
+def _bias(conv: nn.Conv2d) -> th.Tensor:
+    """The bias of a convolution built with one (every layer of :class:`PanoramaEncoder`)."""
+    assert conv.bias is not None
+    return conv.bias
 
 
 def _activate_(h: th.Tensor, act: nn.Module) -> th.Tensor:

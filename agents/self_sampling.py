@@ -14,6 +14,14 @@ Samplers (all give :class:`ProblemResetWrapper` the ``options`` of the next ``re
 - :class:`OracleSampler`: goals in a ground-truth geodesic band (SoRB's sampler, for comparison);
 - :class:`UniformSampler`: the environment's own start and goal sampling.
 
+How a sampler reaches the episodes: the training environment carries a
+:class:`ProblemResetWrapper` (``SafeGoalTD3`` adds one to a plain ``gym.Env``), and
+:func:`install_sampler` connects the sampler to it. ``SafeGoalTD3.learn`` installs the model's
+own ``problem_sampler`` before its first reset; :class:`ProblemSamplingCallback` does the same
+for a sampler passed to ``learn(callback=...)``, as Stable-Baselines3's ``EvalCallback`` brings
+evaluation to any algorithm. This module does not import the algorithm: a sampler scores
+candidates with any model whose ``policy.values`` follows :class:`~agents.policies.SafeGoalPolicy`.
+
 Environment requirements of :class:`SelfSampler`: ``sample_states(n, rng)`` returning ``n``
 random free states, ``reset(options={"start": s, "goal": g})``, and the observation of a state:
 ``observations_at(states)`` where the environment has it, else its panorama ``sensor.render``
@@ -21,13 +29,13 @@ for image observations, else ``normalize(states)`` (the vector observation of a 
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import gymnasium as gym
 import numpy as np
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .algorithm import SafeGoalTD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 Band = Union[float, Tuple[float, float]]
 
@@ -49,7 +57,11 @@ def observations_at(env: gym.Env, states: np.ndarray) -> np.ndarray:
 
 
 def _check_band(band: Band, name: str) -> Tuple[float, float]:
-    lo, hi = (float(band), float(band)) if np.isscalar(band) else (float(band[0]), float(band[1]))
+    if np.isscalar(band):
+        lo = hi = float(cast(float, band))
+    else:
+        pair = cast(Sequence[float], band)
+        lo, hi = float(pair[0]), float(pair[1])
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo < 0 or hi < lo:
         raise ValueError(f"{name} must be a number >= 0 or a band (lo, hi) with 0 <= lo <= hi, got {band!r}")
     return lo, hi
@@ -61,7 +73,7 @@ class ProblemSampler:
     #: name used in configs and logs
     name = "base"
 
-    def bind(self, model: Optional["SafeGoalTD3"]) -> None:
+    def bind(self, model: Optional[BaseAlgorithm]) -> None:
         """Give the sampler the model whose critics it may use (``None`` to unbind)."""
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
@@ -145,14 +157,14 @@ class SelfSampler(ProblemSampler):
         self.aggregate = aggregate
         self.rng = np.random.default_rng(seed)
         self._seeded = seed is not None
-        self.model: Optional["SafeGoalTD3"] = None
+        self.model: Optional[BaseAlgorithm] = None
         self._pool: List[Tuple[np.ndarray, np.ndarray]] = []
         self.n_refills = 0
         self.last_distance: Optional[np.ndarray] = None
         self.last_cost: Optional[np.ndarray] = None
         self._stats: Dict[str, float] = {}
 
-    def bind(self, model: Optional["SafeGoalTD3"]) -> None:
+    def bind(self, model: Optional[BaseAlgorithm]) -> None:
         self.model = model
         if model is not None and not self._seeded and model.seed is not None:
             self.rng = np.random.default_rng([int(model.seed), 1])
@@ -173,7 +185,8 @@ class SelfSampler(ProblemSampler):
         if self.model is None:
             self.last_distance = self.last_cost = None
             return self.rng.random(len(obs)), None  # no critic yet: random problems
-        vals = self.model.policy.values(obs, goals, quantities=("distance", "cost"), aggregate="none")
+        policy: Any = self.model.policy  # a SafeGoalPolicy: values() of the distance and cost critics
+        vals = policy.values(obs, goals, quantities=("distance", "cost"), aggregate="none")
         d = np.asarray(vals["distance"])
         c = _combine(np.asarray(vals["cost"]), self.aggregate)
         pred = _combine(d, self.aggregate)
@@ -187,13 +200,13 @@ class SelfSampler(ProblemSampler):
 
     def refill(self, env: gym.Env) -> None:
         """Draw ``N`` candidate pairs, keep the best ``K`` as the next training problems."""
-        u = env.unwrapped
+        u: Any = env.unwrapped  # the project's env: sample_states
         n = self.n_candidates
         starts = np.asarray(u.sample_states(n, self.rng))
         goals = np.asarray(u.sample_states(n, self.rng))
         by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
         n_cost = 0 if by_cost is None else int(round(self.cost_fraction * self.n_keep))
-        chosen = np.argpartition(by_cost, n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
+        chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
         rest = by_distance.copy()
         rest[chosen] = np.inf
         n_rest = self.n_keep - n_cost
@@ -202,7 +215,7 @@ class SelfSampler(ProblemSampler):
         keep = chosen[self.rng.permutation(len(chosen))]
         self._pool = [(starts[i], goals[i]) for i in keep]
         self.n_refills += 1
-        if self.last_distance is not None:
+        if self.last_distance is not None and self.last_cost is not None:
             self._stats = {"sampler/pred_distance": float(self.last_distance[keep].mean()),
                            "sampler/pred_cost": float(self.last_cost[keep].mean())}
 
@@ -275,14 +288,67 @@ def find_wrappers(env: gym.Env) -> Sequence[ProblemResetWrapper]:
     return out
 
 
+def install_sampler(env: VecEnv, sampler: ProblemSampler, model: Optional[BaseAlgorithm] = None) -> None:
+    """Make ``sampler`` choose the problems of ``env``'s next resets, scoring with ``model``'s critics.
+
+    ``env`` is the model's vectorised training environment; each of its environments must
+    carry a :class:`ProblemResetWrapper`. A sampler other than :class:`UniformSampler` runs in
+    this process, so ``env`` must be a ``DummyVecEnv``; the uniform sampler needs nothing
+    (it leaves the choice to the environment). ``ValueError`` names what is missing.
+    """
+    if not isinstance(env, DummyVecEnv):
+        if isinstance(sampler, UniformSampler):
+            return
+        raise ValueError(f"the {sampler.name!r} problem sampler needs a DummyVecEnv (it runs in this "
+                         f"process), got {type(env).__name__}")
+    wrappers = [w for e in env.envs for w in find_wrappers(e)]
+    if not wrappers and not isinstance(sampler, UniformSampler):
+        raise ValueError("the environment has no ProblemResetWrapper; wrap it with "
+                         "agents.self_sampling.ProblemResetWrapper to use the "
+                         f"{sampler.name!r} problem sampler")
+    sampler.bind(model)
+    for w in wrappers:
+        w.sampler = sampler
+
+
+class ProblemSamplingCallback(BaseCallback):
+    """A Stable-Baselines3 callback that lets ``sampler`` choose the training problems.
+
+    At the start of ``learn`` it connects ``sampler`` to the training environment's
+    :class:`ProblemResetWrapper` layers (:func:`install_sampler`), bound to the learning model
+    (a :class:`SelfSampler` scores candidates with its critics); the episode already under way
+    keeps its problem, every later one is the sampler's. After each rollout it records the
+    sampler's :attr:`~ProblemSampler.stats` in the model's logger. The sampler stays installed
+    after ``learn`` returns.
+
+    Example: ``model.learn(10_000, callback=ProblemSamplingCallback(SelfSampler(target_distance=8)))``.
+    """
+
+    def __init__(self, sampler: Union[str, ProblemSampler], verbose: int = 0, **sampler_kwargs: Any) -> None:
+        super().__init__(verbose)
+        self.sampler = make_sampler(sampler, **sampler_kwargs)
+
+    def _init_callback(self) -> None:
+        install_sampler(self.training_env, self.sampler, self.model)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        for k, v in self.sampler.stats.items():
+            self.logger.record(k, v)
+
+
 __all__ = [
     "OracleSampler",
     "ProblemResetWrapper",
     "ProblemSampler",
+    "ProblemSamplingCallback",
     "SAMPLERS",
     "SelfSampler",
     "UniformSampler",
     "find_wrappers",
+    "install_sampler",
     "make_sampler",
     "observations_at",
 ]

@@ -19,7 +19,7 @@ import platform
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -193,7 +193,6 @@ def build_model(cfg: TrainConfig):
     """The model of a stage: new (unconstrained) or loaded from ``cfg.init`` and set up for fine-tuning."""
     import gymnasium as gym
     from stable_baselines3.common.noise import NormalActionNoise
-    from stable_baselines3.common.utils import FloatSchedule
 
     import safe_mapf_envs  # noqa: F401
 
@@ -201,51 +200,44 @@ def build_model(cfg: TrainConfig):
     from .policies import is_image_space
 
     env = gym.make(cfg.env_id)
-    image = is_image_space(env.observation_space["observation"])
-    noise = NormalActionNoise(np.zeros(env.action_space.shape), cfg.action_noise * np.ones(env.action_space.shape))
+    obs_space = cast(gym.spaces.Dict, env.observation_space)
+    image = is_image_space(obs_space["observation"])
+    shape = cast(Tuple[int, ...], env.action_space.shape)
+    noise = NormalActionNoise(np.zeros(shape), cfg.action_noise * np.ones(shape))
     sampler_kwargs = _sampler_kwargs(cfg)
+    constrained = cfg.stage == "constrained"
+    lagrange: Dict[str, Any] = {}
+    if constrained:
+        lagrange = dict(cost_limit=cfg.cost_limit, lagrange_lr=cfg.lagrange_lr, lagrange_init=cfg.lagrange_init,
+                        lagrange_max=cfg.lagrange_max)
     if cfg.init:
-        model = SafeGoalTD3.load(cfg.init, env=env, device="cpu")
+        model = SafeGoalTD3.load(
+            cfg.init, env=env, device="cpu", seed=cfg.seed, action_noise=noise, learning_starts=cfg.learning_starts,
+            batch_size=cfg.batch_size, learning_rate=cfg.resolved_learning_rate(image),
+            actor_learning_rate=cfg.actor_learning_rate, problem_sampler=cfg.sampler,
+            problem_sampler_kwargs=sampler_kwargs, constrained=constrained,
+            lagrange_update_episodes=cfg.lagrange_update_episodes, tensorboard_log=cfg.tensorboard_log, **lagrange)
         if model.env_id is not None and model.env_id != cfg.env_id.split(":")[-1]:
             raise ValueError(f"checkpoint {cfg.init!r} was trained on {model.env_id!r}, not {cfg.env_id!r}")
-        model.set_random_seed(cfg.seed)
-        model.seed = cfg.seed
-        model.action_noise = noise
-        model.learning_starts = cfg.learning_starts
-        model.batch_size = cfg.batch_size
-        lr = cfg.resolved_learning_rate(image)
-        model.learning_rate = lr
-        model.actor_learning_rate = cfg.actor_learning_rate
-        model._setup_lr_schedule()
-        model.actor_lr_schedule = FloatSchedule(cfg.actor_learning_rate or lr)
-        model.cost_lr_schedule = FloatSchedule(lr)
-        model.replay_buffer.seed(cfg.seed)
-        model.set_problem_sampler(cfg.sampler, **sampler_kwargs)
-    else:
-        bins = cfg.distance_bins or (env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 20)
-        model = SafeGoalTD3(
-            "MultiInputPolicy", env, learning_rate=cfg.resolved_learning_rate(image), buffer_size=cfg.buffer_size,
-            learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, action_noise=noise,
-            replay_buffer_kwargs=dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio,
-                                      achieved_goal_is_observation=image),
-            actor_learning_rate=cfg.actor_learning_rate,
-            problem_sampler=cfg.sampler, problem_sampler_kwargs=sampler_kwargs, env_id=cfg.env_id.split(":")[-1],
-            policy_kwargs=dict(net_arch=list(cfg.net_arch), n_critics=cfg.n_critics,
-                               n_cost_critics=cfg.n_cost_critics, n_distance_bins=int(bins),
-                               n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max, share_encoder=cfg.share_encoder,
-                               features_extractor_kwargs={"net_arch": list(cfg.encoder_arch)}),
-            augmentation=cfg.augmentation,
-            actor_preactivation_penalty=(cfg.actor_penalty if cfg.actor_penalty is not None
-                                         else (0.01 if image else 0.0)),
-            tensorboard_log=cfg.tensorboard_log, verbose=cfg.verbose, seed=cfg.seed, device="cpu",
-        )
-    from .lagrangian import LagrangeMultiplier
-
-    model.constrained = cfg.stage == "constrained"
-    model.lagrange_update_episodes = cfg.lagrange_update_episodes
-    if model.constrained:
-        model.lagrangian = LagrangeMultiplier(cfg.cost_limit, cfg.lagrange_lr, cfg.lagrange_init, cfg.lagrange_max)
-    return model
+        return model
+    bins = cfg.distance_bins or (env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 20)
+    return SafeGoalTD3(
+        "MultiInputPolicy", env, learning_rate=cfg.resolved_learning_rate(image), buffer_size=cfg.buffer_size,
+        learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, action_noise=noise,
+        replay_buffer_kwargs=dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio,
+                                  achieved_goal_is_observation=image),
+        actor_learning_rate=cfg.actor_learning_rate,
+        problem_sampler=cfg.sampler, problem_sampler_kwargs=sampler_kwargs, env_id=cfg.env_id.split(":")[-1],
+        policy_kwargs=dict(net_arch=list(cfg.net_arch), n_critics=cfg.n_critics,
+                           n_cost_critics=cfg.n_cost_critics, n_distance_bins=int(bins),
+                           n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max, share_encoder=cfg.share_encoder,
+                           features_extractor_kwargs={"net_arch": list(cfg.encoder_arch)}),
+        augmentation=cfg.augmentation,
+        actor_preactivation_penalty=(cfg.actor_penalty if cfg.actor_penalty is not None
+                                     else (0.01 if image else 0.0)),
+        constrained=constrained, lagrange_update_episodes=cfg.lagrange_update_episodes, **lagrange,
+        tensorboard_log=cfg.tensorboard_log, verbose=cfg.verbose, seed=cfg.seed, device="cpu",
+    )
 
 
 def _versions() -> Dict[str, str]:

@@ -6,13 +6,25 @@ import json
 import sys
 
 
+class _DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends "(default: X)" to an option's help only where it says something: not for flags
+    (``store_true``/``store_false``), not for a default of ``None`` and not where the help text
+    already states the default in words."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.nargs == 0 or action.default is None or "default" in text:
+            return text
+        return super()._get_help_string(action) or text
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.training import TrainConfig
 
     d = TrainConfig()
     p = sub.add_parser(
         "train", help="train the goal-conditioned safe agent (unconstrained or constrained stage)",
-        description=run.__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        description=run.__doc__, formatter_class=_DefaultsHelpFormatter,
         epilog="example: safe-mapf train --env SafeCentralObstacle-v0 --stage unconstrained --out runs/u; "
                "safe-mapf train --env SafeCentralObstacle-v0 --stage constrained --init runs/u/model.zip --out runs/c",
     )
@@ -85,7 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
     g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
-    g.add_argument("--tensorboard", dest="tensorboard_log", default=None, help="TensorBoard folder")
+    g.add_argument("--tensorboard", dest="tensorboard_log", default=None,
+                   help="write TensorBoard event files to this folder")
     g.add_argument("--verbose", type=int, default=d.verbose)
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)

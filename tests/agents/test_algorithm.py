@@ -1,5 +1,4 @@
 """SafeGoalTD3: training improves the critics, save/load round trips, clear checkpoint errors."""
-import io
 import os
 import zipfile
 
@@ -48,6 +47,7 @@ def trained(tmp_path_factory):
     return model, before, after, (obs_s, obs_g, geo)
 
 
+@pytest.mark.slow
 def test_training_makes_predicted_distance_track_true_distance(trained):
     model, before, after, _ = trained
     assert model.num_timesteps == 1500
@@ -55,6 +55,7 @@ def test_training_makes_predicted_distance_track_true_distance(trained):
     assert after > before + 0.3, f"Spearman {before:.3f} -> {after:.3f}"
 
 
+@pytest.mark.slow
 def test_cost_is_recorded_and_critic_predicts_more_cost_near_the_block(trained):
     model, *_ = trained
     buf = model.replay_buffer
@@ -67,6 +68,7 @@ def test_cost_is_recorded_and_critic_predicts_more_cost_near_the_block(trained):
     assert near[0] > far[0] + 0.3
 
 
+@pytest.mark.slow
 def test_self_sampler_is_used_and_refills(trained):
     model, *_ = trained
     assert isinstance(model.sampler, SelfSampler)
@@ -74,6 +76,7 @@ def test_self_sampler_is_used_and_refills(trained):
     assert model.sampler.model is model
 
 
+@pytest.mark.slow
 def test_save_load_round_trip_keeps_critics_and_lambda(trained, tmp_path):
     model, *_ , (obs_s, obs_g, _) = trained
     model.lagrangian.value = 0.75
@@ -98,6 +101,7 @@ def test_save_load_round_trip_keeps_critics_and_lambda(trained, tmp_path):
     assert loaded.num_timesteps == 50
 
 
+@pytest.mark.slow
 def test_lagrange_multiplier_rises_while_episodes_cost_too_much():
     model = small_model(constrained=True, cost_limit=0.0, lagrange_update_episodes=1, learning_starts=40)
     model.learn(200)
@@ -208,3 +212,102 @@ def test_progress_bar_works_without_rich(capsys):
 def test_rejects_non_goal_env():
     with pytest.raises(ValueError, match="Dict"):
         SafeGoalTD3("MultiInputPolicy", gym.make("Pendulum-v1"), device="cpu")
+
+
+def test_load_overrides_replace_settings_before_setup(checkpoint):
+    env = gym.make("SafeCenterDot-v0")
+    noise = NormalActionNoise(np.zeros(2), 0.5 * np.ones(2))
+    model = SafeGoalTD3.load(checkpoint, env=env, device="cpu", learning_rate=1e-2, actor_learning_rate=2e-3,
+                             batch_size=7, learning_starts=3, action_noise=noise, constrained=True,
+                             problem_sampler="oracle", problem_sampler_kwargs=dict(band=(1.0, 2.0)),
+                             cost_limit=4.0, lagrange_lr=0.5)
+    assert model.batch_size == 7 and model.learning_starts == 3 and model.action_noise is noise
+    assert model.lr_schedule(1.0) == pytest.approx(1e-2) and model.cost_lr_schedule(1.0) == pytest.approx(1e-2)
+    assert model.actor_lr_schedule(1.0) == pytest.approx(2e-3)
+    assert isinstance(model.sampler, OracleSampler) and model.sampler.band == (1.0, 2.0)
+    assert model.constrained
+    lag = model.lagrangian
+    assert (lag.cost_limit, lag.learning_rate, lag.value) == (4.0, 0.5, 0.0)  # init from the stored value
+    # the networks are the checkpoint's
+    plain = SafeGoalTD3.load(checkpoint, device="cpu")
+    sd, sd2 = plain.policy.state_dict(), model.policy.state_dict()
+    assert all(th.equal(sd[k], sd2[k]) for k in sd)
+
+
+def test_load_with_a_seed_is_reproducible(checkpoint):
+    def run():
+        m = SafeGoalTD3.load(checkpoint, env=gym.make("SafeCenterDot-v0"), device="cpu", seed=5, learning_starts=10)
+        m.learn(40)
+        return m.replay_buffer.observations["observation"][:40].copy(), m.policy.state_dict()
+
+    (o1, s1), (o2, s2) = run(), run()
+    np.testing.assert_array_equal(o1, o2)
+    assert all(th.equal(s1[k], s2[k]) for k in s1)
+
+
+def test_load_refuses_unknown_overrides(checkpoint):
+    with pytest.raises(TypeError, match="unknown overrides.*learnin_rate"):
+        SafeGoalTD3.load(checkpoint, device="cpu", learnin_rate=1e-3)
+
+
+def test_problem_sampling_callback_installs_its_sampler():
+    from agents.self_sampling import ProblemSamplingCallback
+
+    model = small_model(problem_sampler="uniform", learning_starts=10)
+    callback = ProblemSamplingCallback("oracle", band=(1.0, 2.0))
+    model.learn(30, callback=callback)
+    env = model.get_env().envs[0]
+    wrapper = [w for w in [env, env.env] if isinstance(w, ProblemResetWrapper)][0]
+    assert wrapper.sampler is callback.sampler and isinstance(callback.sampler, OracleSampler)
+    wrapper.reset()
+    u = wrapper.unwrapped
+    assert 1.0 - 0.3 <= float(u.geodesic_distance(u.position, u.goal)) <= 2.0 + 0.3
+
+
+def test_sampler_needs_a_reset_wrapper():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.self_sampling import install_sampler
+
+    bare = DummyVecEnv([lambda: gym.make("SafeCenterDot-v0")])
+    with pytest.raises(ValueError, match="no ProblemResetWrapper"):
+        install_sampler(bare, SelfSampler())
+
+
+def test_importing_the_algorithm_neither_registers_envs_nor_closes_a_circle():
+    import subprocess
+    import sys
+
+    code = ("import sys, gymnasium as gym; import agents.self_sampling; "
+            "assert 'agents.algorithm' not in sys.modules, 'self_sampling imports the algorithm'; "
+            "import agents.algorithm; "
+            "assert 'safe_mapf_envs' not in sys.modules and 'SafeCenterDot-v0' not in gym.registry; "
+            "import safe_mapf_envs; assert 'SafeCenterDot-v0' in gym.registry")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    subprocess.run([sys.executable, "-c", code], check=True, env=env)
+
+
+def test_a_string_env_id_registers_the_environments_itself():
+    import subprocess
+    import sys
+
+    code = ("from agents.algorithm import SafeGoalTD3; "
+            "m = SafeGoalTD3('MultiInputPolicy', 'SafeCenterDot-v0', device='cpu', learning_starts=1); "
+            "assert m.env_id == 'SafeCenterDot-v0'")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    subprocess.run([sys.executable, "-c", code], check=True, env=env)
+
+
+def test_tensorboard_writes_an_event_file(tmp_path):
+    pytest.importorskip("tensorboard", reason="tensorboard (a dependency of the package) is not installed")
+    model = small_model(tensorboard_log=str(tmp_path), learning_starts=10)
+    model.learn(60, log_interval=1, tb_log_name="tiny")
+    events = list(tmp_path.rglob("events.out.tfevents.*"))
+    assert events and events[0].stat().st_size > 0
+
+
+def test_constructor_settings_reach_the_base_class():
+    m = small_model(buffer_size=1234, learning_starts=7, batch_size=9, tau=0.3, train_freq=2, gradient_steps=3)
+    got = (m.buffer_size, m.learning_starts, m.batch_size, m.tau, m.gamma, m.gradient_steps)
+    assert got == (1234, 7, 9, 0.3, 1.0, 3)
+    assert m.train_freq.frequency == 2 and m.replay_buffer.buffer_size == 1234

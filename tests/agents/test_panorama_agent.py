@@ -144,6 +144,7 @@ def test_random_shift_moves_whole_samples_within_the_pad():
             pytest.fail(f"sample {b} is not a shifted copy")
 
 
+@pytest.mark.slow
 def test_a_short_panorama_run_learns_distances():
     """About a thousand updates from images: predicted distances start to rank true ones."""
     th.manual_seed(0)

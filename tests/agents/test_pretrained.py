@@ -70,6 +70,7 @@ def test_every_apartment_ships_both_stages():
     assert set(available()) >= {(f"SafeApartment{k}-v0", kind) for k in range(4) for kind in KINDS}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", APARTMENTS)
 def test_shipped_apartment_agents_load_and_see_distances(env_id):
     """Every shipped apartment has both stages, each under 10 MB, loadable on a CPU; the

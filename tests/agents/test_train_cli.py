@@ -1,6 +1,7 @@
 """``safe-mapf train``: both stages end to end on a tiny map, files and errors."""
 import json
 
+import pytest
 import torch as th
 
 from agents import SafeGoalTD3
@@ -13,6 +14,7 @@ TINY = ["--env", "SafeCenterDot-v0", "--timesteps", "300", "--learning-starts", 
         "--net-arch", "16", "16", "--encoder-arch", "16", "--n-candidates", "50", "--n-keep", "10"]
 
 
+@pytest.mark.slow
 def test_train_both_stages(tmp_path, capsys):
     u, c = tmp_path / "u", tmp_path / "c"
     assert main(["train", "--stage", "unconstrained", "--out", str(u), *TINY]) == 0
@@ -46,6 +48,7 @@ def test_missing_init_checkpoint(tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_resume_continues_a_run_from_its_last_resume_point(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["train", "--out", str(out), "--replay-save-freq", "150", *TINY]) == 0
@@ -69,3 +72,13 @@ def test_resume_continues_a_run_from_its_last_resume_point(tmp_path, capsys):
 def test_resume_without_a_resume_point_says_so(tmp_path, capsys):
     assert main(["train", "--out", str(tmp_path / "empty"), "--resume", *TINY]) == 2
     assert "nothing to resume" in capsys.readouterr().err
+
+
+def test_help_states_each_default_once(capsys):
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # undo the line wrapping
+    assert "(default: True)" not in text and "(default: False)" not in text and "(default: None)" not in text
+    assert "--no-progress hide the progress bar --tensorboard" in text
+    assert "evaluations.jsonl, summary.json --init" in text  # --out: its own default only
+    assert "--timesteps TIMESTEPS environment steps of this stage (default: 30000)" in text
