@@ -23,9 +23,8 @@ evaluation to any algorithm. This module does not import the algorithm: a sample
 candidates with any model whose ``policy.values`` follows :class:`~agents.policies.SafeGoalPolicy`.
 
 Environment requirements of :class:`SelfSampler`: ``sample_states(n, rng)`` returning ``n``
-random free states, ``reset(options={"start": s, "goal": g})``, and the observation of a state:
-``observations_at(states)`` where the environment has it, else its panorama ``sensor.render``
-for image observations, else ``normalize(states)`` (the vector observation of a position).
+random free states, ``reset(options={"start": s, "goal": g})``, and ``observations_at(states)``,
+the observations of states (vectors or panoramas), as the package's envs provide.
 """
 from __future__ import annotations
 
@@ -41,19 +40,12 @@ Band = Union[float, Tuple[float, float]]
 
 
 def observations_at(env: gym.Env, states: np.ndarray) -> np.ndarray:
-    """The observations an agent would receive at ``states`` (see the module docstring)."""
-    u = env.unwrapped
-    fn = getattr(u, "observations_at", None)
-    if fn is not None:
-        return np.asarray(fn(states))
-    sensor = getattr(u, "sensor", None)
-    if sensor is not None and hasattr(sensor, "render"):  # image observations (panoramas)
-        return np.asarray(sensor.render(np.asarray(states, dtype=np.float64).reshape(-1, 2)))
-    fn = getattr(u, "normalize", None)
+    """The observations an agent would receive at ``states``: ``env.unwrapped.observations_at(states)``."""
+    fn = getattr(env.unwrapped, "observations_at", None)
     if fn is None:
-        raise ValueError(f"{type(u).__name__} has neither observations_at(states) nor normalize(states); "
-                         "self-sampling cannot observe sampled states")
-    return np.asarray(fn(states), dtype=np.float32)
+        raise ValueError(f"{type(env.unwrapped).__name__} has no observations_at(states) method: self-sampling and "
+                         "the planners need the observation of a sampled state (the package's envs have one)")
+    return np.asarray(fn(states))
 
 
 def _check_band(band: Band, name: str) -> Tuple[float, float]:

@@ -92,14 +92,13 @@ class EvaluationSetup:
 
         import safe_mapf_envs
         from agents import load_pretrained
-        from agents.self_sampling import observations_at
 
         if models is None:
             models = {k: load_pretrained(env_id, kind=k) for k in ("unconstrained", "constrained")}
         env = gym.make(env_id)
         rng = np.random.default_rng(seed)
         states = env.unwrapped.sample_states(n_nodes, rng)
-        obs = observations_at(env, states)
+        obs = np.asarray(env.unwrapped.observations_at(states))
         env.close()
         if "min_separation" not in kwargs:
             # a quarter more than the multi-agent env's own spacing of starts (2.5 units on the

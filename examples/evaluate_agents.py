@@ -34,7 +34,6 @@ import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3, load_pretrained
 from agents.evaluation import distance_rank_correlation, run_episodes, sample_problems
 from agents.policies import is_image_space
-from agents.self_sampling import observations_at
 from agents.training import default_eval_distances
 
 
@@ -127,7 +126,8 @@ def main() -> None:
     if not args.skip_timing:
         model = agents["unconstrained"]
         w, c = time.perf_counter(), time.process_time()
-        nodes = observations_at(env, env.unwrapped.sample_states(s.n_nodes, np.random.default_rng(s.seed + 1)))
+        u = env.unwrapped
+        nodes = u.observations_at(u.sample_states(s.n_nodes, np.random.default_rng(s.seed + 1)))
         if visual:
             print(f"rendering {s.n_nodes} panoramas: wall {time.perf_counter() - w:.2f} s, "
                   f"cpu {time.process_time() - c:.2f} s")
