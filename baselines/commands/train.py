@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import Any, Dict, List, Optional
 
 
 class _DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -33,6 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="train from scratch, or fine-tune --init with the Lagrange multiplier")
     p.add_argument("--timesteps", type=int, default=d.timesteps, help="environment steps of this stage")
     p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S",
+                   help="one run per seed instead of --seed, each in <out>/s<seed>, and a combined summary in "
+                        "<out>/summary.json (default out: runs/<env>-<stage>)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="with --seeds: run the seeds as Ray tasks (one CPU each) on a local Ray, 'auto' (the "
+                        "running cluster) or an address; needs the ray extra: pip install \"safe-mapf[ray]\"")
     p.add_argument("--out", dest="out_dir", default=None,
                    help="output folder (default runs/<env>-<stage>-s<seed>): model.zip, config.json, "
                         "evaluations.jsonl, summary.json")
@@ -124,17 +131,90 @@ def run(args: argparse.Namespace) -> int:
     Writes model.zip, checkpoint.zip, config.json, evaluations.jsonl and summary.json to the
     output folder and prints the final held-out figures (success rate on pairs within
     --eval-max-distance, mean episode cost, Spearman correlation of predicted distances).
+    With --seeds, one such run per seed (in parallel on Ray with --ray) and a combined summary.
     """
     from agents.training import train_stage
 
     cfg = config_from_args(args)
-    summary = train_stage(cfg, command=["safe-mapf", *sys.argv[1:]] if sys.argv else None)
+    command = ["safe-mapf", *sys.argv[1:]] if sys.argv else None
+    if args.seeds is not None or args.ray is not None:
+        return _run_seeds(args, cfg, command)
+    summary = train_stage(cfg, command=command)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
-        ev = summary["final_evaluation"]
-        print(f"{summary['env_id']} {summary['stage']}: {summary['timesteps']} steps in {summary['wall_s']} s "
-              f"(cpu {summary['cpu_s']} s); success={ev['success_rate']:.3f} cost={ev['mean_cost']:.2f} "
-              f"spearman={ev['distance_spearman']:.3f} lambda={summary['lagrange_multiplier']:.3f}; "
-              f"saved {summary['model']}")
+        print(_line(summary))
+    return 0
+
+
+def _line(summary: Dict[str, Any], seed: bool = False) -> str:
+    ev = summary["final_evaluation"]
+    which = f" seed {summary['seed']}" if seed else ""
+    return (f"{summary['env_id']} {summary['stage']}{which}: {summary['timesteps']} steps in "
+            f"{summary['wall_s']} s (cpu {summary['cpu_s']} s); success={ev['success_rate']:.3f} "
+            f"cost={ev['mean_cost']:.2f} spearman={ev['distance_spearman']:.3f} "
+            f"lambda={summary['lagrange_multiplier']:.3f}; saved {summary['model']}")
+
+
+def _train_one(cfg: Any, command: Optional[List[str]]) -> Dict[str, Any]:
+    from agents.training import train_stage
+
+    return train_stage(cfg, command=command)
+
+
+def _run_seeds(args: argparse.Namespace, cfg: Any, command: Optional[List[str]]) -> int:
+    """One run per seed (serially, or as Ray tasks) and a combined summary."""
+    import dataclasses
+    import os
+    import time
+
+    import numpy as np
+
+    if args.seeds is None:
+        raise ValueError("--ray trains several seeds at once: give them with --seeds S [S ...]")
+    seeds = list(dict.fromkeys(args.seeds))
+    base = args.out_dir or os.path.join("runs", f"{cfg.env_id.split(':')[-1]}-{cfg.stage}")
+    cfgs = [dataclasses.replace(cfg, seed=s, out_dir=os.path.join(base, f"s{s}")) for s in seeds]
+    t0 = time.perf_counter()
+    if args.ray is not None:
+        from baselines.distributed import init_ray
+
+        ray = init_ray(args.ray)
+        task = ray.remote(num_cpus=1)(_train_one)
+        quiet = [dataclasses.replace(c, progress_bar=False) for c in cfgs]
+        refs = [task.remote(c, command) for c in quiet]
+        summaries = []
+        pending = list(refs)
+        while pending:  # report each run as it ends
+            done, pending = ray.wait(pending, num_returns=1)
+            summaries.append(ray.get(done[0]))
+            if not args.json:
+                print(_line(summaries[-1], seed=True), flush=True)
+        summaries.sort(key=lambda s: seeds.index(s["seed"]))
+    else:
+        summaries = []
+        for c in cfgs:
+            summaries.append(_train_one(c, command))
+            if not args.json:
+                print(_line(summaries[-1], seed=True), flush=True)
+    keys = {"success_rate": "success", "mean_cost": "cost", "distance_spearman": "spearman"}
+    combined: Dict[str, Any] = {
+        "env_id": cfg.env_id, "stage": cfg.stage, "seeds": seeds, "timesteps": cfg.timesteps,
+        "wall_s": round(time.perf_counter() - t0, 1), "ray": args.ray,
+        "runs": [{"seed": s["seed"], "out_dir": os.path.dirname(s["model"]), **{v: s["final_evaluation"][k]
+                                                                                  for k, v in keys.items()}}
+                 for s in summaries],
+    }
+    for v in keys.values():
+        x = np.array([r[v] for r in combined["runs"]], dtype=np.float64)
+        combined[v] = {"mean": float(x.mean()), "std": float(x.std()), "min": float(x.min()), "max": float(x.max())}
+    os.makedirs(base, exist_ok=True)
+    with open(os.path.join(base, "summary.json"), "w") as f:
+        json.dump(combined, f, indent=2)
+    if args.json:
+        print(json.dumps(combined, indent=2))
+    else:
+        print(f"{len(seeds)} seeds in {combined['wall_s']} s: " + ", ".join(
+            f"{v} {combined[v]['mean']:.3f} ± {combined[v]['std']:.3f}" for v in keys.values())
+              + f"; combined summary in {os.path.join(base, 'summary.json')}")
     return 0

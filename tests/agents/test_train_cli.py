@@ -82,3 +82,30 @@ def test_help_states_each_default_once(capsys):
     assert "--no-progress hide the progress bar --tensorboard" in text
     assert "evaluations.jsonl, summary.json --init" in text  # --out: its own default only
     assert "--timesteps TIMESTEPS environment steps of this stage (default: 30000)" in text
+
+
+@pytest.mark.slow
+def test_seeds_serially_and_on_ray_give_the_same_runs(tmp_path, capsys):
+    serial = tmp_path / "serial"
+    assert main(["train", "--seeds", "3", "4", "--out", str(serial), *TINY]) == 0
+    out = capsys.readouterr().out
+    assert "seed 3: 300 steps" in out and "seed 4: 300 steps" in out and "2 seeds in" in out
+    combined = json.loads((serial / "summary.json").read_text())
+    assert [r["seed"] for r in combined["runs"]] == [3, 4]
+    for r in combined["runs"]:
+        assert json.loads((serial / f"s{r['seed']}" / "summary.json").read_text())["seed"] == r["seed"]
+    assert combined["success"]["min"] <= combined["success"]["mean"] <= combined["success"]["max"]
+
+    ray = pytest.importorskip("ray")
+    try:
+        assert main(["train", "--seeds", "3", "4", "--ray", "--out", str(tmp_path / "ray"), *TINY]) == 0
+    finally:
+        ray.shutdown()
+    on_ray = json.loads((tmp_path / "ray" / "summary.json").read_text())
+    assert [{k: v for k, v in r.items() if k != "out_dir"} for r in on_ray["runs"]] == \
+        [{k: v for k, v in r.items() if k != "out_dir"} for r in combined["runs"]]
+
+
+def test_ray_without_seeds_is_refused(tmp_path, capsys):
+    assert main(["train", "--ray", "--out", str(tmp_path), *TINY]) == 2
+    assert "--seeds" in capsys.readouterr().err
