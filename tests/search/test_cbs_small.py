@@ -3,21 +3,26 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from agents.search.cbs import CBSSolver, CTNode, MapfInstance, Proximity, integer_durations, solve_cbs
-from agents.search.constraints import (
+from agents.search.mapf import (
     EDGE,
     EMPTY,
     FOREVER,
     TARGET,
     VERTEX,
+    CBSSolver,
     Conflict,
+    CTNode,
     EdgeConstraint,
     LengthConstraint,
+    MapfInstance,
+    Proximity,
     RangeConstraint,
     VertexConstraint,
     compile_constraints,
+    integer_durations,
+    solve_cbs,
+    validate,
 )
-from agents.search.validate import validate
 from cbs_bruteforce import brute_force_soc
 
 
