@@ -9,18 +9,18 @@ maze-32-32-2: 25, room-32-32-4: 30, empty-8-8: 24) on its six scenarios (random-
 36 instances in all. ``--sweep`` runs ``K = step, 2 * step, ..., max`` instead (per scenario it
 stops at the first ``K`` that is not solved: larger ``K`` count as unsolved).
 
-The solvers: the default CBS of :mod:`agents.search.cbs` (prioritised conflicts, WDG heuristic,
+The solvers: the default CBS of :mod:`agents.search.mapf` (prioritised conflicts, WDG heuristic,
 rectangle, corridor and target reasoning, bypass; grid coordinates passed) and, with
 ``--vanilla`` or ``--both``, the same CBS with those improvements switched off
-(``vanilla=True``). Every solution is checked with :func:`agents.search.validate.validate`
+(``vanilla=True``). Every solution is checked with :func:`agents.search.mapf.validate`
 and must be reported optimal; with ``--both`` the two sums of costs must agree wherever both
 solve. The time of an instance is the wall-clock time of ``solve_cbs`` (instance set-up
 included, file reading excluded); an unsolved instance counts as the time limit in the median
 and makes the worst time read ``>limit``. Everything runs in this one process, one instance
 after the other.
 
-The benchmark files are not part of the repository: ``--data-dir`` (default ``../shared/mapf``
-relative to the repository root) must hold ``maps/<name>.map`` and ``scens/<name>-<scen>.scen``.
+The benchmark files ship with the repository in ``examples/data/movingai/`` (the default
+``--data-dir``); another folder must hold ``maps/<name>.map`` and ``scens/<name>-<scen>.scen``.
 """
 from __future__ import annotations
 
@@ -38,9 +38,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from agents.search.cbs import solve_cbs  # noqa: E402
-from agents.search.mapf_grid import load_instance  # noqa: E402
-from agents.search.validate import validate  # noqa: E402
+from agents.search.mapf import load_instance, solve_cbs, validate  # noqa: E402
 
 #: map name -> the largest number of agents of the benchmark target
 MAX_AGENTS: Dict[str, int] = {
@@ -105,8 +103,8 @@ def write_out(path: Path, rows: List[dict]) -> None:
 def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data-dir", type=Path, default=REPO.parent / "shared" / "mapf",
-                    help="folder with maps/ and scens/ (default: ../shared/mapf from the repository root)")
+    ap.add_argument("--data-dir", type=Path, default=REPO / "examples" / "data" / "movingai",
+                    help="folder with maps/ and scens/ (default: examples/data/movingai in the repository)")
     ap.add_argument("--time-limit", type=float, default=60.0, metavar="S", help="seconds per instance (default 60)")
     ap.add_argument("--maps", nargs="+", default=list(MAX_AGENTS), choices=list(MAX_AGENTS), metavar="NAME",
                     help=f"maps to run (default all: {' '.join(MAX_AGENTS)})")

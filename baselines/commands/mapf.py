@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--node-limit", type=int, default=None, metavar="N", help="high-level expansion limit")
     p.add_argument("--memory-limit", type=float, default=None, metavar="MIB",
                    help="stop with status timeout once the search has grown the process by this many MiB "
-                        "(default: the solver's, agents.search.cbs.DEFAULT_MEMORY_LIMIT_MB; 0 turns the guard off)")
+                        "(default: the solver's, agents.search.mapf.DEFAULT_MEMORY_LIMIT_MB; 0 turns the guard off)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--paths-out", default=None, metavar="FILE",
                    help="write the paths as JSON: per agent, [row, col] at every time step until its final arrival")
@@ -32,9 +32,7 @@ def run(args: argparse.Namespace) -> int:
     """Solve the first K agents of a MovingAI scenario (4-connected moves and waits, vertex and
     swap conflicts, agents stay at their goal, sum of costs) and report status, sum of costs,
     makespan, runtime and search statistics. Exit code 0 when solved, 1 otherwise."""
-    from agents.search.cbs import DEFAULT_MEMORY_LIMIT_MB, solve_cbs
-    from agents.search.mapf_grid import load_instance
-    from agents.search.validate import validate
+    from agents.search.mapf import DEFAULT_MEMORY_LIMIT_MB, load_instance, solve_cbs, validate
 
     if args.agents < 1:
         raise ValueError(f"--agents must be >= 1, got {args.agents}")

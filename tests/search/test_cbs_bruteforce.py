@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from agents.search.cbs import Proximity, solve_cbs
-from agents.search.validate import validate
+from agents.search.mapf import Proximity, solve_cbs, validate
 from cbs_bruteforce import brute_force_soc, random_grid
 
 

@@ -5,14 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.search.cbs import solve_cbs
-from agents.search.mapf_grid import grid_graph, load_instance, load_map, load_scen
-from agents.search.validate import validate
+from agents.search.mapf import grid_graph, load_instance, load_map, load_scen, solve_cbs, validate
 from baselines.cli import main
+from cbs_bruteforce import brute_force_soc
 
-# the benchmark files live beside the repository (../shared/mapf from its root), when present
-DATA = Path(__file__).resolve().parents[2].parent / "shared" / "mapf"
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="MovingAI benchmark files not available")
+# the benchmark files ship with the repository
+DATA = Path(__file__).resolve().parents[2] / "examples" / "data" / "movingai"
 
 
 def paths_for(name, scen, k):
@@ -93,3 +91,14 @@ def test_cli_summary_and_limits(capsys):
     rc = main(["mapf", str(m), str(s), "--agents", "6", "--suboptimality", "1.5", "--json"])
     report = json.loads(capsys.readouterr().out)
     assert rc == 0 and report["status"] in ("optimal", "suboptimal") and report["valid"]
+
+
+
+def test_tiny_pocket_instance_loads_with_its_stated_optimum():
+    # three agents in a corridor with one pocket (the README of the data folder: optimum 25),
+    # checked with the independent brute-force solver
+    inst = load_instance(DATA / "tiny" / "pocket.map", DATA / "tiny" / "pocket.scen")
+    assert len(inst.agents) == 3 and inst.graph.shape == (6, 6)
+    src, dst = inst.graph.nonzero()
+    edges = {(int(u), int(v)): 1 for u, v in zip(src, dst)}
+    assert brute_force_soc(6, edges, inst.starts, inst.goals) == 25

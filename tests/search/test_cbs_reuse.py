@@ -5,16 +5,10 @@ from collections import deque
 import numpy as np
 import pytest
 
-from agents.search.cbs_lowlevel import (
-    AgentPath,
-    Counter,
-    build_mdd,
-    earliest_arrival,
-    prune_mdd,
-    satisfies,
-    space_time_astar,
-)
-from agents.search.constraints import (
+from agents.search.mapf.lowlevel import Counter, earliest_arrival, space_time_astar
+from agents.search.mapf.mdd import build_mdd, prune_mdd
+from agents.search.mapf.paths import AgentPath, satisfies
+from agents.search.mapf.constraints import (
     EMPTY,
     FOREVER,
     EdgeConstraint,
@@ -23,7 +17,7 @@ from agents.search.constraints import (
     VertexConstraint,
     compile_constraints,
 )
-from agents.search.mapf_instance import UNREACHABLE, MapfInstance
+from agents.search.mapf.instance import UNREACHABLE, MapfInstance
 from cbs_bruteforce import random_grid
 
 

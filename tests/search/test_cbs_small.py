@@ -3,21 +3,26 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from agents.search.cbs import CBSSolver, CTNode, MapfInstance, Proximity, integer_durations, solve_cbs
-from agents.search.constraints import (
+from agents.search.mapf import (
     EDGE,
     EMPTY,
     FOREVER,
     TARGET,
     VERTEX,
+    CBSSolver,
     Conflict,
+    CTNode,
     EdgeConstraint,
     LengthConstraint,
+    MapfInstance,
+    Proximity,
     RangeConstraint,
     VertexConstraint,
     compile_constraints,
+    integer_durations,
+    solve_cbs,
+    validate,
 )
-from agents.search.validate import validate
 from cbs_bruteforce import brute_force_soc
 
 
@@ -196,11 +201,11 @@ def test_time_and_node_limits_end_with_timeout():
 
 @pytest.mark.parametrize("suboptimality", [1.0, 1.01])
 def test_memory_limit_ends_with_timeout_and_says_so(monkeypatch, suboptimality):
-    import agents.search.cbs as cbs_module
+    import agents.search.mapf.context as context_module
 
     # a process that seems to grow by 1 MiB every time the guard looks at it
     reads = iter(range(10**9))
-    monkeypatch.setattr(cbs_module, "_rss_bytes", lambda: next(reads) * (1 << 20))
+    monkeypatch.setattr(context_module, "_rss_bytes", lambda: next(reads) * (1 << 20))
     adj, starts, goals = _dense_grid_instance()
     res = solve_cbs(adj, starts, goals, time_limit=60, memory_limit_mb=3, suboptimality=suboptimality)
     assert res.status == "timeout" and res.paths is None
@@ -213,9 +218,9 @@ def test_memory_limit_ends_with_timeout_and_says_so(monkeypatch, suboptimality):
 
 
 def test_memory_limit_reads_the_real_process_size():
-    import agents.search.cbs as cbs_module
+    import agents.search.mapf.context as context_module
 
-    rss = cbs_module._rss_bytes()
+    rss = context_module._rss_bytes()
     assert rss is None or rss > 1 << 20  # a Python process with numpy is larger than 1 MiB
     adj, _ = undirected(4, [(0, 1), (1, 2), (2, 3)])
     res = solve_cbs(adj, [0], [3], memory_limit_mb=64)

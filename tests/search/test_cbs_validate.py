@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from agents.search.cbs import Proximity, solve_cbs
-from agents.search.validate import validate
+from agents.search.mapf import Proximity, solve_cbs, validate
 
 # a 3x3 grid, nodes numbered row by row
 W = 3

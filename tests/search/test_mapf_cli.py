@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-import agents.search.cbs as cbs_module
+import agents.search.mapf.context as context_module
 from baselines.cli import main
 
 
@@ -31,7 +31,7 @@ def test_memory_limit_flag_reaches_the_solver(open_grid, monkeypatch, capsys):
     m, s = open_grid
     # a process that seems to grow by 1 GiB every time the guard looks at it
     reads = iter(range(10**9))
-    monkeypatch.setattr(cbs_module, "_rss_bytes", lambda: next(reads) * (1 << 30))
+    monkeypatch.setattr(context_module, "_rss_bytes", lambda: next(reads) * (1 << 30))
     rc = main(["mapf", str(m), str(s), "--agents", "10", "--memory-limit", "2", "--json"])
     report = json.loads(capsys.readouterr().out)
     assert rc == 1 and report["status"] == "timeout" and "memory limit" in report["message"]

@@ -1,0 +1,84 @@
+"""Multi-agent path finding (MAPF) with Conflict-Based Search (CBS) on any directed graph.
+
+This is the multi-agent planner of "Safe Multi-Agent Navigation guided by Goal-Conditioned
+Safe Reinforcement Learning": waypoints on the replay-buffer graph are planned for several
+agents at once so that their timed paths never collide. The solver is general, depends on
+numpy/scipy only and imports nothing from the rest of the project.
+
+Problem
+    A directed graph with integer edge durations (a scipy sparse matrix, a dense matrix or an
+    adjacency list), one start and one goal node per agent. Waiting in place is always allowed
+    and takes one step. An agent stays at its goal forever after its final arrival. The cost of
+    a solution is the sum over agents of their final arrival times (sum of costs, SOC).
+
+Time models
+    ``"unit"``: every move takes one step (the MAPF benchmark semantics and the paper's
+    unit-time mode). ``"durative"``: a move takes its integer duration, so plan time is
+    environment time. In the durative model an agent traversing ``u -> v`` during
+    ``[t, t + d)`` is taken to occupy *both* ``u`` and ``v`` (and their neighbourhoods under
+    proximity) for the whole traversal; this is conservative: it also forbids entering a node
+    during the step in which another agent leaves it.
+
+Conflicts
+    vertex, edge (swap; unit time), target (an agent runs into another one parked at its goal)
+    and proximity (two agents at distinct nodes closer than a radius under a user-given
+    node-distance function, e.g. a distance critic's predictions).
+
+Algorithm
+    Optimal CBS with prioritised conflicts (cardinal / semi-cardinal, classified with MDDs),
+    bypass, target reasoning and an admissible high-level heuristic (``"cg"``: cardinal
+    conflict graph, ``"dg"``: dependency graph, ``"wdg"``: weighted dependency graph, solved as
+    an edge-weighted minimum vertex cover). With a heuristic, the conflict to split is chosen
+    f-aware: first the splits whose children get larger lower bounds (the raised agent's edges
+    of the weighted conflict graph lowered by its cost increase, the cover recomputed), and a
+    child that must raise its agent's cost is planned only when it is popped. Results that
+    depend only on constraints (MDDs, pair sub-problems) are cached by constraint content.
+    ``suboptimality=w > 1`` switches to ECBS (focal search at both levels; the returned cost is
+    at most ``w`` times the optimum). ``vanilla=True`` turns prioritisation, bypass, target and
+    symmetry reasoning and the heuristic off.
+
+Public API
+    :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
+    :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
+    :func:`validate` to check any solution independently, the constraint and conflict types,
+    and the MovingAI benchmark loaders :func:`load_map`, :func:`load_scen`,
+    :func:`load_instance`, :func:`grid_graph`.
+
+Modules, one concept each
+    ``solver`` (entry: options, pre-checks, limits), ``result`` (what a solve returns),
+    ``cbs`` (the optimal high-level search and its conflict choice), ``ecbs`` (bounded
+    suboptimal), ``heuristics`` (conflict graphs and their vertex covers), ``ctnode`` (the
+    constraint-tree node), ``context`` (caches and limits of one solve), ``mdd``, ``paths``
+    (timed paths and reservations), ``conflicts`` (conflict types and detection),
+    ``lowlevel`` (space-time A*, focal search, earliest arrival), ``successors`` (what the
+    low-level searches share), ``constraints``, ``symmetry`` (corridor and rectangle
+    reasoning), ``instance``, ``validate`` and ``movingai`` (benchmark files).
+"""
+from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict
+from .constraints import (
+    EMPTY,
+    FOREVER,
+    CompiledConstraints,
+    Constraint,
+    ConstraintSet,
+    EdgeConstraint,
+    LengthConstraint,
+    RangeConstraint,
+    VertexConstraint,
+    compile_constraints,
+)
+from .ctnode import CTNode
+from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
+from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
+from .result import STATUSES, CBSResult, CBSStats
+from .solver import DEFAULT_MEMORY_LIMIT_MB, HEURISTICS, CBSSolver, solve_cbs
+from .validate import validate
+
+__all__ = [
+    "CARDINAL", "CBSResult", "CBSSolver", "CBSStats", "CTNode", "CompiledConstraints", "Conflict", "Constraint",
+    "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "EDGE", "EMPTY", "EdgeConstraint", "FOREVER", "GridInstance",
+    "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
+    "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
+    "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "load_instance", "load_map",
+    "load_scen", "solve_cbs", "validate",
+]

@@ -1,0 +1,125 @@
+"""What every search of one CBS solve shares: the instance, the limits, the caches and the counters.
+
+A :class:`SearchContext` lives for one :meth:`~agents.search.mapf.solver.CBSSolver.solve`; the
+main search, the pair sub-searches of the WDG heuristic and ECBS all read and fill it.
+:meth:`SearchContext.check_time` enforces the deadline and the memory guard.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import sys
+import time as _time
+from typing import TYPE_CHECKING, Dict, Optional, Tuple
+
+from .constraints import CompiledConstraints, ConstraintSet, compile_constraints
+from .instance import MapfInstance
+from .lowlevel import Counter, SearchTimeout
+from .mdd import MDD
+from .paths import AgentPath
+from .result import CBSStats
+from .symmetry import Corridors, GridGeometry
+
+if TYPE_CHECKING:  # the solver builds the context; imported for the annotation only
+    from .solver import CBSSolver
+
+#: the memory guard reads the process's resident size once every this many checks
+_MEMORY_CHECK_EVERY = 256
+
+#: ``(agent, constraint content)``: what results that depend on one agent's constraints are keyed by
+AgentKey = Tuple[int, frozenset]
+#: ``(agent i, agent j, content of i, content of j)``: the key of results on a pair of agents
+PairKey = Tuple[int, int, frozenset, frozenset]
+
+
+def _rss_bytes() -> Optional[int]:
+    """The resident memory of this process in bytes, or ``None`` where it cannot be read.
+
+    Linux: the current resident size (``/proc/self/statm``). Elsewhere with :mod:`resource`:
+    the peak resident size, which only grows (still a valid guard). Otherwise ``None``.
+    """
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError, AttributeError):
+        pass
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak) if sys.platform == "darwin" else int(peak) * 1024
+
+
+class SearchContext:
+    """What every search of one solve shares: the instance, limits, caches and counters."""
+
+    def __init__(self, inst: MapfInstance, deadline: float, options: CBSSolver):
+        self.inst = inst
+        self.deadline = deadline
+        self.opt = options
+        #: resident-memory ceiling in bytes (the process's size at the start plus the limit)
+        self.memory_cap: Optional[int] = None
+        if options.memory_limit_mb is not None:
+            base = _rss_bytes()
+            if base is not None:
+                self.memory_cap = base + int(options.memory_limit_mb * (1 << 20))
+        self._checks = 0
+        #: ``"time"`` or ``"memory"``: which limit ended the search
+        self.stop_reason = "time"
+        self.counter = Counter()
+        #: (agent, constraint content) -> its MDD
+        self.mdds: Dict[AgentKey, MDD] = {}
+        #: (agent i, agent j, content of i, content of j) -> optimal cost of the pair alone
+        self.pairs: Dict[PairKey, int] = {}
+        #: pair key -> (optimal cost, the two paths) of solved pair sub-problems (unit time)
+        self.pair_solutions: Dict[PairKey, Tuple[int, AgentPath, AgentPath]] = {}
+        #: per agent pair, how many of its pair searches stopped at their node limit
+        self.pair_limit_hits: Dict[Tuple[int, int], int] = {}
+        #: pair key -> whether no two cheapest paths of the pair avoid each other
+        self.dependent: Dict[PairKey, bool] = {}
+        #: (agent, constraint content, target, corridor or None) -> earliest arrival
+        self.arrivals: Dict[Tuple[int, frozenset, int, Optional[int]], int] = {}
+        #: (agent, constraint content) -> the compiled constraints
+        self.compiled: Dict[AgentKey, CompiledConstraints] = {}
+        self.stats = CBSStats()
+        self.ids = itertools.count()
+        self._corridors: Optional[Corridors] = None
+        self.geometry: Optional[GridGeometry] = None
+        size = options._pair_check_size()
+        #: when to run the deferred pair feasibility check (None: never)
+        self.pair_check_at: Optional[float] = (
+            _time.perf_counter() + 1.0
+            if options.pair_check_states < size <= 100 * options.pair_check_states else None)
+        self.infeasible_reason: Optional[str] = None
+        if options.symmetry and inst.unit and options.grid_coords is not None:
+            self.geometry = GridGeometry(inst, options.grid_coords)
+
+    def corridors(self) -> Optional[Corridors]:
+        """The corridor index (built on first use; unit time only)."""
+        if self._corridors is None and self.opt.symmetry and self.inst.unit:
+            self._corridors = Corridors(self.inst)
+        return self._corridors
+
+    def compile(self, gid: int, cons: ConstraintSet) -> CompiledConstraints:
+        """Agent ``gid``'s constraints compiled for the low level (cached by content)."""
+        key = (gid, cons.content)
+        cc = self.compiled.get(key)
+        if cc is None:
+            cc = compile_constraints(cons, self.inst.n_nodes, self.inst.goals[gid])
+            if len(self.compiled) > 200_000:
+                self.compiled.clear()
+            self.compiled[key] = cc
+        return cc
+
+    def check_time(self) -> None:
+        """Raise :class:`SearchTimeout` past the deadline or (checked now and then) the memory cap."""
+        if _time.perf_counter() > self.deadline:
+            raise SearchTimeout
+        if self.memory_cap is not None:
+            self._checks += 1
+            if self._checks % _MEMORY_CHECK_EVERY == 1:
+                rss = _rss_bytes()
+                if rss is not None and rss > self.memory_cap:
+                    self.stop_reason = "memory"
+                    raise SearchTimeout

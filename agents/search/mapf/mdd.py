@@ -1,0 +1,253 @@
+"""Multi-valued decision diagrams (MDDs): every state on some cheapest path of one agent.
+
+The high level classifies conflicts with them (cardinal when every cheapest path of both
+agents meets the conflict), the dependency-graph heuristics merge two of them
+(:func:`mdds_dependent`), and rectangle reasoning reads their single-node levels. States are
+coded ``time * N + node`` as in the low-level searches.
+"""
+from __future__ import annotations
+
+from typing import Dict, List, Optional, Set, Tuple
+
+import numpy as np
+
+from .constraints import CompiledConstraints
+from .instance import MapfInstance
+from .successors import make_expander
+
+#: The ``end`` of :meth:`MDD.avoidable` when none is given: past every time of a plan.
+_NO_END = 1 << 60
+
+
+class MDD:
+    """Multi-valued decision diagram: every (node, time) state on some cheapest path.
+
+    Built for an agent, its constraints and its optimal cost ``C``. ``levels[t]`` is the set of
+    nodes an optimal path can be at (unit time) at time ``t``; ``must[k]`` is the set of nodes
+    *every* optimal path occupies at step ``k`` (durative) or is at (unit). ``edges`` lists the
+    kept transitions ``(v, t, w, t2)``.
+    """
+
+    __slots__ = ("cost", "edges", "levels", "must", "_children", "start", "goal", "N", "_singles", "_kids")
+
+    def __init__(self, cost: int, edges: List[Tuple[int, int, int, int]], start: int, goal: int, N: int, unit: bool):
+        self.cost = cost
+        self.edges = edges
+        self.start = start
+        self.goal = goal
+        self.N = N
+        self._singles: Optional[List[Tuple[int, int]]] = None
+        self._kids: Optional[Dict[int, List[int]]] = None
+        self._children: Optional[Dict[int, List[int]]] = None
+        levels: List[Set[int]] = [set() for _ in range(cost + 1)]
+        levels[0].add(start)
+        levels[cost].add(goal)
+        for e in edges:
+            levels[e[3]].add(e[2])
+        self.levels = levels
+        if unit:
+            self.must = [lv if len(lv) == 1 else set() for lv in levels]
+        else:
+            must: List[Optional[Set[int]]] = [None] * cost
+            for v, t, w, t2 in edges:
+                pair = {v, w}
+                for k in range(t, t2):
+                    m = must[k]
+                    must[k] = set(pair) if m is None else (m & pair)
+            self.must = [m if m is not None else set() for m in must]
+
+    def avoidable(self, node: int, start: int, unit: bool, end: Optional[int] = None) -> bool:
+        """Whether some optimal path is never at / never occupies ``node`` at a step in ``[start, end]``.
+
+        ``end=None`` means for ever (the agent stays parked at its goal after ``cost``).
+        """
+        N = self.N
+        target = self.cost * N + self.goal
+        hi = end if end is not None else _NO_END
+        if self.goal == node and hi >= self.cost:
+            return False  # parked there from ``cost`` on
+        if start <= 0 <= hi and self.start == node:
+            return False
+        stack = [self.start]
+        seen = {self.start}
+        while stack:
+            code = stack.pop()
+            if code == target:
+                return True
+            t, v = divmod(code, N)
+            for nxt in self.children.get(code, ()):
+                if nxt in seen:
+                    continue
+                t2, w = divmod(nxt, N)
+                if unit:
+                    if w == node and start <= t2 <= hi:
+                        continue
+                else:
+                    # occupies v and w during steps t .. t2 - 1
+                    if (w == node or v == node) and t2 - 1 >= start and t <= hi:
+                        continue
+                seen.add(nxt)
+                stack.append(nxt)
+        return False
+
+    @property
+    def children(self) -> Dict[int, List[int]]:
+        """State code ``t * N + v`` -> the codes ``t2 * N + w`` of its children (built on first use)."""
+        if self._children is None:
+            N = self.N
+            children: Dict[int, List[int]] = {}
+            for v, t, w, t2 in self.edges:
+                k = t * N + v
+                lst = children.get(k)
+                if lst is None:
+                    children[k] = [t2 * N + w]
+                else:
+                    lst.append(t2 * N + w)
+            self._children = children
+        return self._children
+
+    def kids(self) -> Dict[int, List[int]]:
+        """State code ``t * N + v`` -> the nodes of its children (built on first use)."""
+        if self._kids is None:
+            N = self.N
+            kids: Dict[int, List[int]] = {}
+            for v, t, w, _ in self.edges:
+                k = t * N + v
+                lst = kids.get(k)
+                if lst is None:
+                    kids[k] = [w]
+                else:
+                    lst.append(w)
+            self._kids = kids
+        return self._kids
+
+    def singletons(self) -> List[Tuple[int, int]]:
+        """``(time, node)`` of every level with a single node (unit time)."""
+        if self._singles is None:
+            self._singles = [(t, next(iter(lv))) for t, lv in enumerate(self.levels) if len(lv) == 1]
+        return self._singles
+
+
+def build_mdd(inst: MapfInstance, agent: int, cc: CompiledConstraints, cost: int) -> MDD:
+    """The MDD of ``agent`` under ``cc`` for its optimal cost ``cost``."""
+    N = inst.n_nodes
+    h = inst.h[agent]
+    s, g = inst.starts[agent], inst.goals[agent]
+    fwd: List[Tuple[int, int, int, int]] = []
+    if inst.unit:
+        vset, eset, forever = cc.vset, cc.eset, cc.forever
+        succ = inst.succ
+        layer: Set[int] = {s}
+        for t in range(cost):
+            nt = t + 1
+            vb = nt * N
+            rem = cost - nt
+            nxt: Set[int] = set()
+            last = nt == cost
+            for v in sorted(layer):
+                src = (t * N + v) * N
+                for w in succ[v]:
+                    if h[w] > rem or (last and w != g) or (vb + w) in vset:
+                        continue
+                    if w != v and (src + w) in eset:
+                        continue
+                    if forever:
+                        fw = forever.get(w)
+                        if fw is not None and nt >= fw:
+                            continue
+                    nxt.add(w)
+                    fwd.append((v, t, w, nt))
+            layer = nxt
+    else:
+        expand = make_expander(inst, cc, None)
+        layers: Dict[int, Set[int]] = {0: {s}}
+        for t in range(cost):
+            nodes = layers.get(t)
+            if not nodes:
+                continue
+            for v in sorted(nodes):
+                for w, nt, _ in expand(v, t):
+                    if nt > cost or nt + h[w] > cost:
+                        continue
+                    if nt == cost and w != g:
+                        continue
+                    layers.setdefault(nt, set()).add(w)
+                    fwd.append((v, t, w, nt))
+    alive = {cost * N + g}
+    kept = []
+    for v, t, w, nt in reversed(fwd):
+        if nt * N + w in alive:
+            alive.add(t * N + v)
+            kept.append((v, t, w, nt))
+    kept.reverse()
+    return MDD(cost, kept, s, g, N, inst.unit)
+
+
+def prune_mdd(m: MDD, cc: CompiledConstraints) -> Optional[MDD]:
+    """Unit time: the MDD of the same agent and cost under constraints ``cc`` that include the
+    ones ``m`` was built under (``None`` if no path of that cost is left).
+
+    Every path of cost ``m.cost`` that meets ``cc`` meets the older constraints too, so it is a
+    path of ``m``: dropping the edges ``cc`` forbids and trimming what no longer joins the start
+    to the goal gives exactly the MDD :func:`build_mdd` would build, at a fraction of the work.
+    """
+    N = m.N
+    vset, eset, forever = cc.vset, cc.eset, cc.forever
+    alive = {m.start}
+    fwd = []
+    for e in m.edges:  # in order of time
+        v, t, w, t2 = e
+        if t * N + v not in alive or (t2 * N + w) in vset:
+            continue
+        if w != v and ((t * N + v) * N + w) in eset:
+            continue
+        if forever:
+            fw = forever.get(w)
+            if fw is not None and t2 >= fw:
+                continue
+        alive.add(t2 * N + w)
+        fwd.append(e)
+    target = m.cost * N + m.goal
+    if target not in alive:
+        return None
+    back = {target}
+    kept = []
+    for e in reversed(fwd):
+        v, t, w, t2 = e
+        if t2 * N + w in back:
+            back.add(t * N + v)
+            kept.append(e)
+    kept.reverse()
+    return MDD(m.cost, kept, m.start, m.goal, N, True)
+
+
+def mdds_dependent(m1: MDD, m2: MDD, near_mat: Optional[np.ndarray] = None) -> bool:
+    """Unit time: True if no pair of optimal paths (one from each MDD) is conflict-free.
+
+    A joint breadth-first search over both MDDs level by level (an agent past its cost stays
+    at its goal); used by the dependency graph heuristics.
+    """
+    N = m1.N
+    T = max(m1.cost, m2.cost)
+    k1, k2 = m1.kids(), m2.kids()
+    c1, c2 = m1.cost, m2.cost
+    g1, g2 = (m1.goal,), (m2.goal,)
+    cur = {(m1.start, m2.start)}
+    empty = ()
+    for t in range(T):
+        nxt = set()
+        tN = t * N
+        for a, b in cur:
+            na = k1.get(tN + a, empty) if t < c1 else g1
+            nb = k2.get(tN + b, empty) if t < c2 else g2
+            for x in na:
+                for y in nb:
+                    if x == y or (x == b and y == a):
+                        continue
+                    if near_mat is not None and near_mat[x, y]:
+                        continue
+                    nxt.add((x, y))
+        if not nxt:
+            return True
+        cur = nxt
+    return not cur

@@ -1,0 +1,170 @@
+"""MovingAI MAPF benchmark grids: ``.map`` / ``.scen`` loading and conversion to a CBS graph.
+
+Semantics of the benchmark (Stern et al., "Multi-Agent Pathfinding: Definitions, Variants,
+and Benchmarks"): 4-connected moves plus wait, one step each; vertex and swap conflicts;
+agents stay at their goal; the cost is the sum of final arrival times. In ``.scen`` files,
+``x`` is the column and ``y`` the row; the 9th column is an 8-connected (octile) length and
+is *not* the 4-connected cost, so it is loaded only for reference.
+
+Free cells (``.``, ``G``, ``S``) become graph nodes numbered in row-major order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+from scipy import sparse
+
+FREE_CHARS = frozenset(".GS")
+Cell = Tuple[int, int]
+PathLike = Union[str, Path]
+
+
+@dataclass
+class GridMap:
+    """An occupancy grid: ``free[row, col]`` is True where an agent may stand."""
+
+    free: np.ndarray
+    name: str = ""
+
+    @property
+    def height(self) -> int:
+        return int(self.free.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.free.shape[1])
+
+
+@dataclass(frozen=True)
+class ScenAgent:
+    """One line of a ``.scen`` file, as (row, col) cells."""
+
+    start: Cell
+    goal: Cell
+    octile_length: float
+    bucket: int = 0
+
+
+def load_map(path: PathLike) -> GridMap:
+    """Read a MovingAI ``.map`` file."""
+    path = Path(path)
+    lines = path.read_text().splitlines()
+    header = {}
+    i = 0
+    while i < len(lines) and lines[i].strip().lower() != "map":
+        parts = lines[i].split()
+        if len(parts) == 2:
+            header[parts[0].lower()] = parts[1]
+        i += 1
+    if i == len(lines):
+        raise ValueError(f"{path}: no 'map' line in the header")
+    try:
+        h, w = int(header["height"]), int(header["width"])
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: header needs integer 'height' and 'width'") from exc
+    rows = lines[i + 1:i + 1 + h]
+    if len(rows) != h or any(len(r) < w for r in rows):
+        raise ValueError(f"{path}: expected {h} rows of {w} characters")
+    free = np.array([[ch in FREE_CHARS for ch in r[:w]] for r in rows], dtype=bool)
+    return GridMap(free, path.stem)
+
+
+def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
+    """Read the first ``k`` agents (all if ``None``) of a MovingAI ``.scen`` file."""
+    path = Path(path)
+    out: List[ScenAgent] = []
+    for ln, line in enumerate(path.read_text().splitlines()):
+        if not line.strip() or line.lower().startswith("version"):
+            continue
+        parts = line.split("\t") if "\t" in line else line.split()
+        if len(parts) < 9:
+            raise ValueError(f"{path}:{ln + 1}: expected 9 columns, got {len(parts)}")
+        sx, sy, gx, gy = (int(p) for p in parts[4:8])
+        out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0])))
+        if k is not None and len(out) >= k:
+            break
+    if k is not None and len(out) < k:
+        raise ValueError(f"{path} has {len(out)} agents, {k} requested")
+    return out
+
+
+def grid_graph(grid: GridMap) -> Tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
+    """The 4-connected graph of the free cells.
+
+    Returns ``(durations, cells, index)``: the CSR matrix (all durations 1), ``cells[node] =
+    (row, col)`` and ``index[row, col] = node`` (-1 on blocked cells).
+    """
+    free = grid.free
+    h, w = free.shape
+    index = -np.ones((h, w), dtype=np.int64)
+    rr, cc = np.nonzero(free)
+    index[rr, cc] = np.arange(len(rr))
+    cells = np.stack([rr, cc], axis=1)
+    src_parts, dst_parts = [], []
+    for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        r2, c2 = rr + dr, cc + dc
+        ok = (r2 >= 0) & (r2 < h) & (c2 >= 0) & (c2 < w)
+        ok[ok] = free[r2[ok], c2[ok]]
+        src_parts.append(index[rr[ok], cc[ok]])
+        dst_parts.append(index[r2[ok], c2[ok]])
+    src = np.concatenate(src_parts)
+    dst = np.concatenate(dst_parts)
+    n = len(rr)
+    m = sparse.csr_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
+    return m, cells, index
+
+
+@dataclass
+class GridInstance:
+    """A grid MAPF instance ready for :func:`agents.search.mapf.solve_cbs` (unit time)."""
+
+    grid: GridMap
+    agents: List[ScenAgent]
+    graph: sparse.csr_matrix
+    cells: np.ndarray
+    index: np.ndarray
+    starts: List[int] = field(default_factory=list)
+    goals: List[int] = field(default_factory=list)
+
+    def node(self, cell: Cell) -> int:
+        """Graph node of a ``(row, col)`` cell."""
+        r, c = cell
+        if not (0 <= r < self.grid.height and 0 <= c < self.grid.width) or self.index[r, c] < 0:
+            raise ValueError(f"cell (row={r}, col={c}) is blocked or off the {self.grid.height}x{self.grid.width} map")
+        return int(self.index[r, c])
+
+    def cell(self, node: int) -> Cell:
+        """``(row, col)`` of a graph node."""
+        r, c = self.cells[node]
+        return int(r), int(c)
+
+    def to_rowcol(self, paths: Sequence[Sequence]) -> List[List[List[int]]]:
+        """Paths (node per time step, or ``(node, time)`` per time step) as ``[row, col]`` lists."""
+        out = []
+        for p in paths:
+            seq = []
+            for item in p:
+                v = item[0] if isinstance(item, (tuple, list)) else item
+                r, c = self.cells[int(v)]
+                seq.append([int(r), int(c)])
+            out.append(seq)
+        return out
+
+
+def load_instance(map_path: PathLike, scen_path: PathLike, k: Optional[int] = None) -> GridInstance:
+    """Load a map and the first ``k`` agents of a scenario as a :class:`GridInstance`."""
+    grid = load_map(map_path)
+    agents = load_scen(scen_path, k)
+    graph, cells, index = grid_graph(grid)
+    inst = GridInstance(grid, agents, graph, cells, index)
+    for i, a in enumerate(agents):
+        for what, cell in (("start", a.start), ("goal", a.goal)):
+            r, c = cell
+            if not (0 <= r < grid.height and 0 <= c < grid.width) or index[r, c] < 0:
+                raise ValueError(f"{scen_path}: agent {i} {what} (row={r}, col={c}) is not a free cell of {map_path}")
+    inst.starts = [inst.node(a.start) for a in agents]
+    inst.goals = [inst.node(a.goal) for a in agents]
+    return inst

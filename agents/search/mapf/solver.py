@@ -1,0 +1,275 @@
+"""The entry point of the MAPF solver: :class:`CBSSolver` (its options) and :func:`solve_cbs`.
+
+The solver checks the instance without searching where it can (unreachable goals, starts or
+goals within the proximity radius, an exact two-agent feasibility check of every pair on small
+instances), then runs optimal CBS (:mod:`agents.search.mapf.cbs`) or, with
+``suboptimality > 1``, ECBS (:mod:`agents.search.mapf.ecbs`) under the time, memory and node
+limits, and returns a :class:`~agents.search.mapf.result.CBSResult`. See :mod:`agents.search.mapf`
+for the problem and the algorithm.
+"""
+from __future__ import annotations
+
+import gc
+import time as _time
+from typing import Any, Optional, Sequence, Union
+
+from numpy.typing import ArrayLike
+
+from .cbs import CBSSearch
+from .constraints import EMPTY
+from .context import SearchContext
+from .ecbs import ECBSSearch
+from .instance import GraphLike, MapfInstance, ProximityLike
+from .lowlevel import SearchTimeout
+from .result import CBSResult
+from .symmetry import GridGeometry
+
+#: The high-level heuristics of optimal CBS.
+HEURISTICS = ("none", "cg", "dg", "wdg")
+#: default ``memory_limit_mb``: how much a search may grow the process (MiB)
+DEFAULT_MEMORY_LIMIT_MB = 4096.0
+
+
+def _pair_feasible(inst: MapfInstance, a: int, b: int) -> bool:
+    """Whether agents ``a`` and ``b`` alone can both reach their goals (joint-state search).
+
+    Uses unit-time semantics (vertex, swap, proximity), which every durative plan can be
+    serialised into, so ``False`` proves the whole instance infeasible under either model.
+    """
+    succ = inst.succ
+    near = inst.near_mat
+    start = (inst.starts[a], inst.starts[b])
+    goal = (inst.goals[a], inst.goals[b])
+    seen = {start}
+    stack = [start]
+    while stack:
+        x, y = stack.pop()
+        if (x, y) == goal:
+            return True
+        for x2 in succ[x]:
+            for y2 in succ[y]:
+                if x2 == y2 or (x2 == y and y2 == x):
+                    continue
+                if near is not None and near[x2, y2]:
+                    continue
+                s = (x2, y2)
+                if s not in seen:
+                    seen.add(s)
+                    stack.append(s)
+    return False
+
+
+class CBSSolver:
+    """Conflict-Based Search with its options; :meth:`solve` runs it on one instance.
+
+    Args:
+        instance: a :class:`MapfInstance`, or the ``graph`` to build one from ``starts``,
+            ``goals``, ``time_model`` and ``proximity`` (see :class:`MapfInstance`).
+        suboptimality: 1 for optimal CBS; ``w > 1`` for ECBS with cost at most ``w`` x optimal.
+        heuristic: high-level heuristic, ``"wdg"`` (default), ``"dg"``, ``"cg"`` or ``"none"``.
+        prioritize: choose cardinal, then semi-cardinal conflicts first (via MDDs).
+        bypass: adopt a same-cost child path with fewer conflicts instead of branching.
+        target_reasoning: resolve target conflicts with length / "never again" constraints.
+        symmetry: corridor reasoning (unit time, any graph) and rectangle reasoning (unit
+            time, 4-connected grids whose node coordinates are given as ``grid_coords``).
+        grid_coords: ``(N, 2)`` integer (row, col) of every node of a 4-connected grid graph.
+        vanilla: plain CBS (no prioritisation, bypass, target or symmetry reasoning, heuristic).
+        time_limit: wall-clock seconds; the search ends with status ``"timeout"``.
+        memory_limit_mb: how much the process may grow (resident memory, MiB) during the
+            search; past it the search ends with status ``"timeout"`` and a message saying so,
+            instead of exhausting the machine's memory (long optimal searches keep every open
+            constraint-tree node). ``None`` turns the guard off; where the resident size cannot
+            be read (no ``/proc`` and no :mod:`resource`) there is no guard.
+        node_limit: high-level expansions; the search ends with status ``"timeout"``.
+        pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
+            (past it the pair's lower bound is used, which keeps the heuristic admissible); an
+            agent pair whose searches keep reaching it gets half of it each time, down to 8.
+        pair_check_states: an exact two-agent feasibility check of every pair (which can prove
+            infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
+            once the search has run for a second when it is at most 100 times this.
+    """
+
+    def __init__(
+        self,
+        instance: Union[MapfInstance, GraphLike],
+        starts: Optional[Sequence[int]] = None,
+        goals: Optional[Sequence[int]] = None,
+        *,
+        time_model: str = "unit",
+        proximity: ProximityLike = None,
+        suboptimality: float = 1.0,
+        heuristic: str = "wdg",
+        prioritize: bool = True,
+        bypass: bool = True,
+        target_reasoning: bool = True,
+        symmetry: bool = True,
+        grid_coords: Optional[ArrayLike] = None,
+        vanilla: bool = False,
+        time_limit: float = 60.0,
+        memory_limit_mb: Optional[float] = DEFAULT_MEMORY_LIMIT_MB,
+        node_limit: Optional[int] = None,
+        pair_node_limit: int = 64,
+        pair_check_states: int = 20_000,
+    ) -> None:
+        if isinstance(instance, MapfInstance):
+            if starts is not None or goals is not None:
+                raise ValueError("pass starts/goals only with a graph, not with a MapfInstance")
+            self.instance = instance
+        else:
+            if starts is None or goals is None:
+                raise ValueError("starts and goals are required with a graph")
+            self.instance = MapfInstance(instance, starts, goals, time_model=time_model, proximity=proximity)
+        if heuristic not in HEURISTICS:
+            raise ValueError(f"heuristic must be one of {HEURISTICS}, got {heuristic!r}")
+        if not (suboptimality >= 1.0):
+            raise ValueError(f"suboptimality must be >= 1, got {suboptimality!r}")
+        if not (time_limit > 0):
+            raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+        if memory_limit_mb is not None and not (memory_limit_mb > 0):
+            raise ValueError(f"memory_limit_mb must be > 0 (or None for no limit), got {memory_limit_mb!r}")
+        if node_limit is not None and node_limit < 0:
+            raise ValueError(f"node_limit must be >= 0, got {node_limit!r}")
+        self.suboptimality = float(suboptimality)
+        if vanilla:
+            heuristic, prioritize, bypass, target_reasoning, symmetry = "none", False, False, False, False
+        self.heuristic = heuristic
+        self.prioritize = prioritize
+        self.bypass = bypass
+        self.target_reasoning = target_reasoning
+        self.symmetry = symmetry and prioritize
+        self.grid_coords = grid_coords
+        if grid_coords is not None:
+            GridGeometry(self.instance, grid_coords)  # validate now: a clear error early
+        self.time_limit = float(time_limit)
+        self.memory_limit_mb = None if memory_limit_mb is None else float(memory_limit_mb)
+        self.node_limit = node_limit
+        self.pair_node_limit = int(pair_node_limit)
+        self.pair_check_states = int(pair_check_states)
+
+    # -------------------------------------------------------------- checks
+    def _precheck(self) -> Optional[str]:
+        """A reason the instance is infeasible, found without searching, or ``None``."""
+        inst = self.instance
+        bad = inst.unreachable_agents()
+        if bad:
+            i = bad[0]
+            return f"goal {inst.goals[i]} of agent {i} is unreachable from its start {inst.starts[i]}"
+        if inst.near_mat is not None:
+            k = inst.n_agents
+            for what, nodes in (("start", inst.starts), ("goal", inst.goals)):
+                for a in range(k):
+                    for b in range(a + 1, k):
+                        if inst.near_mat[nodes[a], nodes[b]]:
+                            return (f"the {what}s of agents {a} and {b} ({nodes[a]}, {nodes[b]}) are closer "
+                                    "than the proximity radius")
+        if self._pair_check_size() <= self.pair_check_states:
+            return self._pair_check()
+        return None
+
+    def _pair_check_size(self) -> int:
+        k = self.instance.n_agents
+        return k * (k - 1) // 2 * self.instance.n_nodes ** 2
+
+    def _pair_check(self) -> Optional[str]:
+        inst = self.instance
+        k = inst.n_agents
+        for a in range(k):
+            for b in range(a + 1, k):
+                if not _pair_feasible(inst, a, b):
+                    return f"agents {a} and {b} cannot both reach their goals, even ignoring the others"
+        return None
+
+    # -------------------------------------------------------------- solve
+    def solve(self) -> CBSResult:
+        """Run the search and return a :class:`CBSResult` (never raises on a hard instance)."""
+        # the search allocates many small long-lived objects; with the default thresholds the
+        # cyclic garbage collector keeps rescanning them (about a fifth of the run time), so it
+        # runs less often during the search (the thresholds are restored afterwards)
+        old = gc.get_threshold()
+        gc.set_threshold(max(old[0], 100_000), max(old[1], 50), max(old[2], 100))
+        try:
+            return self._solve()
+        finally:
+            gc.set_threshold(*old)
+
+    def _solve(self) -> CBSResult:
+        t0 = _time.perf_counter()
+        inst = self.instance
+        ctx = SearchContext(inst, t0 + self.time_limit, self)
+        stats = ctx.stats
+
+        def finish(res: CBSResult) -> CBSResult:
+            stats.ll_expanded = ctx.counter.expanded
+            stats.ll_calls = ctx.counter.calls
+            stats.runtime_s = _time.perf_counter() - t0
+            res.stats = stats
+            res.time_model = inst.time_model
+            return res
+
+        if inst.n_agents == 0:
+            return finish(CBSResult("optimal", [], 0, 0, 0, message="no agents"))
+        reason = self._precheck()
+        if reason is not None:
+            return finish(CBSResult("infeasible", message=reason))
+        w = self.suboptimality
+        search: CBSSearch
+        if w > 1.0:
+            ecbs = ECBSSearch(ctx, w, self.target_reasoning, self.node_limit)
+            search, run = ecbs, ecbs.run_focal
+        else:
+            search = CBSSearch(ctx, list(range(inst.n_agents)), [EMPTY] * inst.n_agents,
+                               heuristic=self.heuristic, prioritize=self.prioritize, bypass=self.bypass,
+                               target_reasoning=self.target_reasoning, node_limit=self.node_limit,
+                               symmetry=self.symmetry)
+            run = search.run
+        try:
+            status, node = run()
+        except SearchTimeout:
+            lb = search.lower_bound or None
+            if ctx.stop_reason == "memory":
+                msg = (f"memory limit reached: the search grew the process by more than "
+                       f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
+            else:
+                msg = f"time limit of {self.time_limit:g} s reached"
+            return finish(CBSResult("timeout", lower_bound=lb, message=msg))
+        if status == "infeasible":
+            msg = ctx.infeasible_reason or "the constraint tree was exhausted: no solution exists"
+            return finish(CBSResult("infeasible", message=msg))
+        if status == "limit":
+            return finish(CBSResult("timeout", lower_bound=search.lower_bound or None,
+                                    message=f"node limit of {self.node_limit} expansions reached"))
+        assert node is not None  # "solved" comes with its node
+        paths = [list(p.events) for p in node.paths]
+        soc = sum(p.cost for p in node.paths)
+        makespan = max(p.cost for p in node.paths)
+        if w > 1.0:
+            lb = min(search.lower_bound, soc)
+            st = "optimal" if lb >= soc else "suboptimal"
+            msg = f"cost within {w:g} x optimal" if st == "suboptimal" else "cost equals the proven lower bound"
+        else:
+            lb, st, msg = soc, "optimal", "optimal sum of costs"
+        return finish(CBSResult(st, paths, soc, makespan, lb, message=msg))
+
+
+def solve_cbs(
+    graph: GraphLike,
+    starts: Sequence[int],
+    goals: Sequence[int],
+    *,
+    time_model: str = "unit",
+    proximity: ProximityLike = None,
+    suboptimality: float = 1.0,
+    time_limit: float = 60.0,
+    node_limit: Optional[int] = None,
+    vanilla: bool = False,
+    **options: Any,
+) -> CBSResult:
+    """Solve a multi-agent path finding instance with CBS (or ECBS if ``suboptimality > 1``).
+
+    ``graph`` holds edge durations (scipy sparse / dense matrix or adjacency list); see
+    :class:`CBSSolver` for the options. Returns a :class:`CBSResult`; raises ``ValueError``
+    only for malformed input (bad node ids, duplicate starts or goals, bad durations).
+    """
+    return CBSSolver(graph, starts, goals, time_model=time_model, proximity=proximity,
+                     suboptimality=suboptimality, time_limit=time_limit, node_limit=node_limit,
+                     vanilla=vanilla, **options).solve()
