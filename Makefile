@@ -1,6 +1,6 @@
 # Two commands set everything up on a fresh machine with Python 3.11 and make:
 #   make demo   create .venv, install, run the main job
-#   make test   create .venv, install, run the test suite
+#   make test   create .venv, install, lint (ruff), type-check (mypy), run the test suite
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
@@ -24,6 +24,8 @@ demo: $(STAMP)
 	$(BIN)/python examples/demo.py
 
 test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -n 2 tests
 
 bench: $(STAMP)

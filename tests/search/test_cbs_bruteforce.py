@@ -1,9 +1,9 @@
 """CBS optimality against an independent joint-state brute force on tiny random instances."""
 import numpy as np
 import pytest
+from cbs_bruteforce import brute_force_soc, random_grid
 
 from agents.search.mapf import Proximity, solve_cbs, validate
-from cbs_bruteforce import brute_force_soc, random_grid
 
 
 def random_graph(rng, n, p_edge, directed=False, max_dur=1):

@@ -4,10 +4,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cbs_bruteforce import brute_force_soc
 
 from agents.search.mapf import grid_graph, load_instance, load_map, load_scen, solve_cbs, validate
 from baselines.cli import main
-from cbs_bruteforce import brute_force_soc
 
 # the benchmark files ship with the repository
 DATA = Path(__file__).resolve().parents[2] / "examples" / "data" / "movingai"

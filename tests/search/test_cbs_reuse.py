@@ -4,10 +4,8 @@ from collections import deque
 
 import numpy as np
 import pytest
+from cbs_bruteforce import random_grid
 
-from agents.search.mapf.lowlevel import Counter, earliest_arrival, space_time_astar
-from agents.search.mapf.mdd import build_mdd, prune_mdd
-from agents.search.mapf.paths import AgentPath, satisfies
 from agents.search.mapf.constraints import (
     EMPTY,
     FOREVER,
@@ -18,7 +16,9 @@ from agents.search.mapf.constraints import (
     compile_constraints,
 )
 from agents.search.mapf.instance import UNREACHABLE, MapfInstance
-from cbs_bruteforce import random_grid
+from agents.search.mapf.lowlevel import Counter, earliest_arrival, space_time_astar
+from agents.search.mapf.mdd import build_mdd, prune_mdd
+from agents.search.mapf.paths import AgentPath, satisfies
 
 
 def grid(rng, h, w, p_block):
