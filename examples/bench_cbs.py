@@ -1,7 +1,7 @@
 """CBS on the MovingAI MAPF benchmark: solved count, median and worst solve time per map.
 
 Run: ``python examples/bench_cbs.py [--data-dir DIR] [--time-limit 60] [--maps NAME ...]
-[--vanilla | --both] [--sweep [--step 5]] [--out results.csv|results.json]``
+[--vanilla | --both] [--sweep [--step 5]] [--out results.csv|results.json] [--ray [ADDRESS]]``
 
 Instances are ``(map, scenario, K)``: the first ``K`` agents of a scenario. By default each
 map is run at its largest ``K`` (random-32-32-10: 60, empty-16-16: 30, random-32-32-20: 20,
@@ -17,7 +17,9 @@ and must be reported optimal; with ``--both`` the two sums of costs must agree w
 solve. The time of an instance is the wall-clock time of ``solve_cbs`` (instance set-up
 included, file reading excluded); an unsolved instance counts as the time limit in the median
 and makes the worst time read ``>limit``. Everything runs in this one process, one instance
-after the other.
+after the other, unless ``--ray [ADDRESS]`` runs each scenario as a Ray task (one CPU each; a
+local Ray on this machine's cores, ``auto`` for the running cluster): the same instances and
+answers, timed while other instances run beside them.
 
 The benchmark files ship with the repository in ``examples/data/movingai/`` (the default
 ``--data-dir``); another folder must hold ``maps/<name>.map`` and ``scens/<name>-<scen>.scen``.
@@ -80,6 +82,31 @@ def run_one(data: Path, name: str, scen: str, k: int, solver: str, time_limit: f
     }
 
 
+def run_chain(data: Path, name: str, scen: str, ks: List[int], solver: str, time_limit: float) -> List[dict]:
+    """Solve one scenario at growing agent counts; once one is not solved, the larger ones are skipped."""
+    rows: List[dict] = []
+    failed = False
+    for k in ks:
+        if failed:
+            row: dict = {f: None for f in FIELDS}
+            row.update(solver=solver, map=name, scen=scen, agents=k, status="skipped", solved=False,
+                       time_s=time_limit, message="a smaller K was not solved")
+        else:
+            row = run_one(data, name, scen, k, solver, time_limit)
+            failed = not row["solved"]
+        rows.append(row)
+    return rows
+
+
+def print_rows(rows: List[dict]) -> None:
+    for row in rows:
+        if row["status"] == "skipped":
+            continue
+        lb = "" if row["solved"] else f" lb {row['lower_bound']}"
+        print(f"  {row['solver']:7s} {row['map']:16s} {row['scen']:9s} K={row['agents']:2d}  {row['status']:8s} "
+              f"soc {row['soc']}{lb}  {row['time_s']:7.2f} s  hl {row['hl_expanded']}", flush=True)
+
+
 def summary(rows: List[dict], time_limit: float) -> str:
     """``solved/total, median and worst time`` of some rows (unsolved count as the limit)."""
     if not rows:
@@ -117,6 +144,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--sweep", action="store_true", help="run K = step..max per scenario instead of K = max only")
     ap.add_argument("--step", type=int, default=5, help="agent-count step of --sweep (default 5)")
     ap.add_argument("--out", type=Path, default=None, metavar="FILE", help="write every row as .csv or .json")
+    ap.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                    help="solve the scenarios as Ray tasks (one CPU each): a local Ray, 'auto' or a cluster address "
+                         "(needs the ray extra)")
     args = ap.parse_args(argv)
     data = args.data_dir
     if not (data / "maps").is_dir() or not (data / "scens").is_dir():
@@ -124,25 +154,37 @@ def main(argv: Optional[List[str]] = None) -> int:
     solvers = ["vanilla"] if args.vanilla else (["cbs", "vanilla"] if args.both else ["cbs"])
 
     rows: List[dict] = []
-    print(f"CBS on MovingAI, time limit {args.time_limit:g} s per instance, solvers: {', '.join(solvers)}", flush=True)
+    where = "" if args.ray is None else f", on Ray ({args.ray})"
+    print(f"CBS on MovingAI, time limit {args.time_limit:g} s per instance, solvers: {', '.join(solvers)}{where}",
+          flush=True)
+    chains = []  # (solver, map, scenario, agent counts): one task each
     for name in args.maps:
         kmax = MAX_AGENTS[name]
         ks = list(range(args.step, kmax, args.step)) + [kmax] if args.sweep else [kmax]
-        for solver in solvers:
-            for scen in args.scens:
-                failed = False
-                for k in ks:
-                    if failed:
-                        row = {f: None for f in FIELDS}
-                        row.update(solver=solver, map=name, scen=scen, agents=k, status="skipped",
-                                   solved=False, time_s=args.time_limit, message="a smaller K was not solved")
-                    else:
-                        row = run_one(data, name, scen, k, solver, args.time_limit)
-                        failed = not row["solved"]
-                        lb = "" if row["solved"] else f" lb {row['lower_bound']}"
-                        print(f"  {solver:7s} {name:16s} {scen:9s} K={k:2d}  {row['status']:8s} soc {row['soc']}{lb}  "
-                              f"{row['time_s']:7.2f} s  hl {row['hl_expanded']}", flush=True)
-                    rows.append(row)
+        chains += [(solver, name, scen, ks) for solver in solvers for scen in args.scens]
+    results: Dict[int, List[dict]] = {}
+    if args.ray is None:
+        for i, (solver, name, scen, ks) in enumerate(chains):
+            results[i] = run_chain(data, name, scen, ks, solver, args.time_limit)
+            print_rows(results[i])
+    else:
+        from baselines.distributed import init_ray
+
+        ray = init_ray(args.ray)
+        if __name__ != "__main__":  # imported from a file path: workers cannot import it by name
+            ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
+        task = ray.remote(num_cpus=1)(run_chain)
+        refs = {task.remote(data, name, scen, ks, solver, args.time_limit): i
+                for i, (solver, name, scen, ks) in enumerate(chains)}
+        pending = list(refs)
+        while pending:  # print each chain as it ends
+            done, pending = ray.wait(pending, num_returns=1)
+            results[refs[done[0]]] = ray.get(done[0])
+            print_rows(results[refs[done[0]]])
+    for i in range(len(chains)):
+        rows += results[i]
+    for name in args.maps:
+        kmax = MAX_AGENTS[name]
         for solver in solvers:
             sel = [r for r in rows if r["map"] == name and r["solver"] == solver]
             print(f"{name:16s} {solver:7s} {summary(sel, args.time_limit)}", flush=True)
