@@ -108,6 +108,13 @@ def run(args: argparse.Namespace) -> int:
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
                          "test problems")
+    import gymnasium as gym
+
+    import safe_mapf_envs  # noqa: F401  (registers the ids)
+
+    if args.env.split(":")[-1] not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("Safe"))
+        raise ValueError(f"unknown env id {args.env!r}; registered: {', '.join(known)}")
     if args.ray is not None:
         from baselines.distributed import require_ray
 

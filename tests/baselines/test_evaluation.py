@@ -249,3 +249,11 @@ def test_an_execution_becomes_a_gif_with_a_caption(setup, tmp_path):
     assert not np.array_equal(frames[0], frames[2])  # the agent moves
     with pytest.raises(ValueError, match="every must be >= 1"):
         execution_frames(env.field, traj, np.array([[7.0, 5.0]]), 1.0, every=0)
+
+
+def test_evaluate_names_an_unknown_env_id_before_any_work(tmp_path, capsys):
+    from baselines.cli import main
+
+    assert main(["evaluate", "--env", "Nope-v0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown env id 'Nope-v0'" in err and "SafeCentralObstacle-v0" in err

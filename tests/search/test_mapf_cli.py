@@ -45,3 +45,26 @@ def test_negative_memory_limit_is_refused(open_grid, capsys):
     m, s = open_grid
     rc = main(["mapf", str(m), str(s), "--agents", "2", "--memory-limit", "-5"])
     assert rc != 0 and "memory_limit_mb must be > 0" in capsys.readouterr().err
+
+
+def test_a_scenario_that_cannot_be_read_names_its_file_and_line(tmp_path):
+    from agents.search.mapf import load_scen
+
+    scen = tmp_path / "broken.scen"
+    scen.write_text("version 1\n0\tx.map\t8\t8\t1\t1\t5\t5\t5.6\n0\tx.map\t8\t8\tone\t1\t5\t5\t5.6\n")
+    with pytest.raises(ValueError, match=r"broken\.scen:3: cannot read"):
+        load_scen(scen)
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    import subprocess
+    import sys
+
+    # the reader is gone before the command writes (like `safe-mapf envs --json | head -c 0`)
+    code = ("import sys, time; from baselines.cli import main; time.sleep(1.0); "
+            "sys.exit(main(['envs', '--json']))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 1  # the BrokenPipeError branch
+    assert "Traceback" not in err and "BrokenPipeError" not in err

@@ -82,8 +82,11 @@ def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
         parts = line.split("\t") if "\t" in line else line.split()
         if len(parts) < 9:
             raise ValueError(f"{path}:{ln + 1}: expected 9 columns, got {len(parts)}")
-        sx, sy, gx, gy = (int(p) for p in parts[4:8])
-        out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0])))
+        try:
+            sx, sy, gx, gy = (int(p) for p in parts[4:8])
+            out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0])))
+        except ValueError as exc:
+            raise ValueError(f"{path}:{ln + 1}: cannot read the agent's bucket, cells or length ({exc})") from None
         if k is not None and len(out) >= k:
             break
     if k is not None and len(out) < k:
