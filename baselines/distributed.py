@@ -108,6 +108,9 @@ def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycl
     workers = [Worker.remote(payload, max_cycles) for _ in range(n_workers)]
     pool = ray.util.ActorPool(workers)
     items = [(i, m, p, seed + p.index) for i, (m, p) in enumerate(tasks)]
+    # the longest runs first (many agents, far goals, a search to plan), so none is left to run alone at the end
+    depth = {"hard": 0, "medium": 1, "easy": 2}
+    items.sort(key=lambda t: (-t[2].n_agents, depth.get(t[2].difficulty, 3), not t[1].search, t[0]))
     try:
         yield from pool.map_unordered(lambda w, t: w.run.remote(t), items)
     finally:

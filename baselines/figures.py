@@ -138,6 +138,7 @@ def execution_frames(field, trajectories: np.ndarray, goals: np.ndarray, goal_th
     for t in steps:
         img = renderer.render(traj[t], goals=goals, trails=[traj[:t + 1, i] for i in range(traj.shape[1])],
                               waypoints=waypoints, parked=arrived[t])
+        img = np.ascontiguousarray(img[::-1])  # y up, as in the trajectory figure
         done = int(arrived[t].sum())
         frames.append(caption(img, [title, f"step {t}: {done}/{traj.shape[1]} agents arrived; "
                                            "lines: trails, diamonds: planned waypoints, x: goals"]))
