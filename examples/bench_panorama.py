@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from typing import Callable, Dict, List, Tuple
 
@@ -117,8 +118,11 @@ def main() -> None:
     if not args.json:
         print(f"per second, wall clock (CPU time); batch {args.batch}, {args.agents} agents in the parallel env")
         print(f"{'id':30s} {'panoramas batched':>20s} {'panoramas single':>20s} {'batched + agents':>20s} "
-              f"{'env steps':>18s} {'parallel agent-steps':>20s}")
-    for env_id in VISUAL_IDS:
+              f"{'env steps':>18s} {'parallel agent-steps':>20s}", flush=True)
+    for i, env_id in enumerate(VISUAL_IDS):
+        # each row takes 5 figures x --repeats x --seconds: say what is being timed meanwhile
+        print(f"[{i + 1}/{len(VISUAL_IDS)}] timing {env_id} (about {5 * args.repeats * args.seconds:.0f} s) ...",
+              file=sys.stderr, flush=True)
         row = {"env_id": env_id, **bench_renderer(env_id, args.batch, args.seconds, args.repeats)}
         row["env_steps_per_s"] = bench_env(env_id, args.seconds, args.repeats)
         row["parallel_agent_steps_per_s"] = bench_parallel(env_id, args.agents, args.seconds, args.repeats)
