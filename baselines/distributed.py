@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import io
 import os
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, Optional, Sequence, Tuple
 
 RAY_HINT = 'Ray is not installed: pip install "safe-mapf[ray]" (or pip install ray)'
 
@@ -84,7 +84,7 @@ class EvaluationWorker:
         self.envs: Dict[int, Any] = {}
 
     def run(self, task: Tuple[int, Any, Any, int]) -> Tuple[int, Dict[str, Any], Any]:
-        """Run one task ``(index, method, problem, seed)``; returns ``(index, row, execution)``."""
+        """Run one task ``(index, method, problem, base seed)``; returns ``(index, row, execution)``."""
         import safe_mapf_envs
         from baselines.evaluation import run_row
 
@@ -97,8 +97,7 @@ class EvaluationWorker:
 
 
 def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycles: int,
-               address: Optional[str] = None, progress: Optional[Callable[[str], None]] = None,
-               ) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
+               address: Optional[str] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
     """Run ``tasks`` (``(method, problem)`` pairs) on Ray workers; yields ``(index, row, execution)``
     as results arrive (``index``: the task's position)."""
     ray = init_ray(address)
@@ -107,7 +106,7 @@ def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycl
     Worker = ray.remote(num_cpus=1)(EvaluationWorker)
     workers = [Worker.remote(payload, max_cycles) for _ in range(n_workers)]
     pool = ray.util.ActorPool(workers)
-    items = [(i, m, p, seed + p.index) for i, (m, p) in enumerate(tasks)]
+    items = [(i, m, p, seed) for i, (m, p) in enumerate(tasks)]
     # the longest runs first (many agents, far goals, a search to plan), so none is left to run alone at the end
     depth = {"hard": 0, "medium": 1, "easy": 2}
     items.sort(key=lambda t: (-t[2].n_agents, depth.get(t[2].difficulty, 3), not t[1].search, t[0]))
@@ -116,14 +115,6 @@ def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycl
     finally:
         for w in workers:
             ray.kill(w)
-
-
-def ordered(results: Iterable[Tuple[int, Dict[str, Any], Any]], n: int) -> List[Tuple[Dict[str, Any], Any]]:
-    """Results back in task order."""
-    out: List[Any] = [None] * n
-    for i, row, ex in results:
-        out[i] = (row, ex)
-    return out
 
 
 __all__ = ["EvaluationWorker", "RAY_HINT", "init_ray", "require_ray", "run_on_ray", "setup_payload"]

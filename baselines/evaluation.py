@@ -194,8 +194,9 @@ def _methods_for(methods: Sequence[Method], k: int, policy_agents: Optional[Sequ
 
 
 def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed: int):
-    """Run ``method`` on ``problem`` in ``env`` (seeded with ``seed``); returns ``(row, execution)``."""
-    ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed)
+    """Run ``method`` on ``problem`` in ``env``; returns ``(row, execution)``. The run is seeded with
+    ``seed + problem.index``, wherever it runs."""
+    ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed + problem.index)
     row = {
         "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty,
         "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
@@ -264,7 +265,7 @@ def evaluate(
                     env.close()
                 env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=prob.n_agents, max_cycles=max_cycles)
                 cell = (prob.n_agents, prob.difficulty)
-            row, ex = run_row(setup, env, m, prob, seed + prob.index)
+            row, ex = run_row(setup, env, m, prob, seed)
             done(row, prob, ex)
             if bar is not None:
                 bar.update(1)
