@@ -146,6 +146,10 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
       within reach of its goal clear of every other goal; it must be at least
       ``2 * agent_radius``;
     - ``collision_cost`` (0.0): cost added per contact with another agent;
+    - ``agent_collisions`` (True): ``False`` lets agents pass through each other (the
+      convention of the published code of the paper: its agents never touch); walls and
+      obstacles still stop them, no contacts are reported, pinned starts (and goals) may overlap
+      and ``n_agents`` is not bounded by the map's area;
     - ``observe_neighbors`` (0): adds the ``neighbors`` key with this many nearest agents;
     - ``obs_type`` ("vector" or "panorama"): the observation type (see :attr:`obs_types`);
     - ``action_scale`` (1.0): world units per unit of action; ``sensor_kwargs`` (None): camera
@@ -189,6 +193,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         goal_distance: Optional[Tuple[float, float]] = None,
         min_separation: Optional[float] = None,
         collision_cost: float = 0.0,
+        agent_collisions: bool = True,
         observe_neighbors: int = 0,
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
@@ -197,6 +202,9 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         self.max_cycles = check_count(max_cycles, "max_cycles", 1)
         self.observe_neighbors = check_count(observe_neighbors, "observe_neighbors", 0)
         self.collision_cost = check_number(collision_cost, "collision_cost")
+        if not isinstance(agent_collisions, (bool, np.bool_)):
+            raise ValueError(f"agent_collisions must be True or False, got {show(agent_collisions)}")
+        self.agent_collisions = bool(agent_collisions)
         self._setup(
             layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
             cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
@@ -214,7 +222,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             )
         self.min_separation = min_separation
         fit = self.scenario.max_agents(2.0 * radius)
-        if n_agents > fit:
+        if n_agents > fit and self.agent_collisions:
             raise ValueError(
                 f"n_agents={n_agents} cannot fit on {self.scenario.layout.name}: its free area holds at most "
                 f"{plural(fit, 'agent')} of radius {radius:g} without overlap (and sampled starts need more room: "
@@ -349,6 +357,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         if not ok.all():
             i = int(np.flatnonzero(~ok)[0])
             sc.check_position(p[i], f"{what} of agent_{i}")  # raises with the precise reason
+        if not self.agent_collisions:  # agents pass through each other: overlapping is fine
+            return p
         diff = p[:, None] - p[None]
         dist = np.sqrt((diff * diff).sum(-1))
         close = np.triu(dist < 2.0 * sc.agent_radius, k=1)
@@ -484,7 +494,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             goals = self._sample_separated(rng, "goal")
         n = self.n_agents
         # a new pymunk space every episode: reusing one across resets is not deterministic
-        self._world = World(sc.size, sc.boxes, starts, sc.agent_radius, self.substeps)
+        self._world = World(sc.size, sc.boxes, starts, sc.agent_radius, self.substeps,
+                            agent_collisions=self.agent_collisions)
         self._pos = starts.copy()
         self._goals = goals
         self._goals_norm = self.normalize(goals)

@@ -23,6 +23,7 @@ from pymunk import batch as _batch  # batched body access (pymunk >= 6.6, a decl
 Box = Tuple[float, float, float, float]
 
 _AGENT_TYPE = 1
+_AGENT_GROUP = 1
 _WALL_THICKNESS = 10.0
 _BATCH_MIN_AGENTS = 4
 _MAX_EXTRA_SETTLE = 30  # settling steps at most on top of the first (jammed crowds)
@@ -37,6 +38,8 @@ class World:
         positions: initial agent centres, shape ``(N, 2)``.
         agent_radius: radius of every agent.
         substeps: physics sub-steps per environment step.
+        agent_collisions: ``False`` lets agents pass through each other (they still collide
+            with walls and obstacles); no contacts between agents are then reported.
     """
 
     def __init__(
@@ -46,6 +49,7 @@ class World:
         positions: np.ndarray,
         agent_radius: float,
         substeps: int,
+        agent_collisions: bool = True,
     ) -> None:
         self.size = (float(size[0]), float(size[1]))
         self.agent_radius = float(agent_radius)
@@ -75,6 +79,8 @@ class World:
             disc.elasticity = 0.0
             disc.friction = 0.0
             disc.collision_type = _AGENT_TYPE
+            if not agent_collisions:  # shapes of one non-zero group never collide with each other
+                disc.filter = pymunk.ShapeFilter(group=_AGENT_GROUP)
             disc.agent_index = i  # read back in _record_contact
             space.add(body, disc)
             self.bodies.append(body)
@@ -83,7 +89,7 @@ class World:
         self._recent: Set[Tuple[int, int]] = set()  # contacts of the latest physics step
         # resting contacts keep about collision_slop of overlap; settle until within twice that
         self._settle_tol = 2.0 * space.collision_slop
-        if len(self.bodies) > 1:
+        if len(self.bodies) > 1 and agent_collisions:
             space.on_collision(_AGENT_TYPE, _AGENT_TYPE, pre_solve=self._record_contact)
         # With many agents, setting velocities and reading positions body by body dominates
         # the step; pymunk's batch API does both for all bodies in one call each (its fixed

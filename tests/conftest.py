@@ -30,6 +30,12 @@ class StraightLineAgent:
     def pairwise(self, a, b, aggregate="max"):
         return self._seg(np.asarray(a)[:, None, :], np.asarray(b)[None, :, :])
 
+    def pairwise_distance(self, a, b, aggregate="max", progress=None):
+        return self.pairwise(a, b)[0]
+
+    def pairwise_cost(self, a, b, aggregate="max", progress=None):
+        return self.pairwise(a, b)[1]
+
     def distance(self, obs, goal, aggregate="max"):
         return self._seg(obs, goal)[0]
 
