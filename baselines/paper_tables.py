@@ -1,7 +1,11 @@
-"""The paper's Table II (visual navigation), as printed in "Safe Multi-Agent Navigation guided by
-Goal-Conditioned Safe Reinforcement Learning": per scene, difficulty and agent count, the
-cumulative cost mean, its standard deviation and the success rate of each method (``None``:
-not applicable, the paper runs the policies without search on single agents only).
+"""The paper's Tables I (2D navigation) and II (visual navigation), as printed in "Safe Multi-Agent
+Navigation guided by Goal-Conditioned Safe Reinforcement Learning": per (scene,) difficulty and
+agent count, the cumulative cost mean, its standard deviation and the success rate of each
+method (``None``: not applicable, the paper runs the policies without search on single agents
+only).
+
+Table I's text names CentralObstacle; the authors' published code made it on CenterDot
+(``SafeCenterDot-v0`` here), with the conventions of :mod:`baselines.paper_protocol`.
 
 Its scenes are ReplicaCAD apartments in Habitat; ours are different apartments of our own, so the
 numbers are set side by side for scale, not as a like-for-like comparison.
@@ -12,8 +16,27 @@ from typing import Dict, Optional, Tuple
 
 Cell = Optional[Tuple[float, float, float]]
 
-#: the paper's method columns, in order, by our method names
-TABLE2_METHODS = ("unconstrained_policy", "sorb", "constrained_policy", "ours")
+#: the paper's method columns of both tables, in order, by our method names
+TABLE1_METHODS = ("unconstrained_policy", "sorb", "constrained_policy", "ours")
+
+#: (difficulty, agents) -> (mean, std, success rate) per method of TABLE1_METHODS
+TABLE1: Dict[Tuple[str, int], Tuple[Cell, Cell, Cell, Cell]] = {
+    ("easy", 1): ((0.46, 1.05, 1.0), (1.38, 2.62, 1.0), (0.47, 1.07, 1.0), (0.49, 1.06, 1.0)),
+    ("easy", 5): (None, (6.39, 4.66, 1.0), None, (1.68, 1.21, 1.0)),
+    ("easy", 10): (None, (8.69, 4.05, 1.0), None, (2.24, 1.03, 1.0)),
+    ("easy", 20): (None, (10.51, 3.57, 1.0), None, (2.72, 0.80, 1.0)),
+    ("medium", 1): ((1.58, 2.03, 1.0), (2.30, 3.02, 1.0), (1.58, 2.01, 1.0), (1.59, 1.99, 1.0)),
+    ("medium", 5): (None, (5.12, 3.65, 1.0), None, (3.09, 1.50, 1.0)),
+    ("medium", 10): (None, (7.27, 3.66, 0.98), None, (4.11, 1.48, 0.98)),
+    ("medium", 20): (None, (8.73, 3.73, 0.98), None, (4.78, 1.33, 0.98)),
+    ("hard", 1): ((3.98, 4.40, 1.0), (4.05, 4.19, 1.0), (4.19, 4.23, 1.0), (3.09, 3.87, 1.0)),
+    ("hard", 5): (None, (8.58, 3.79, 1.0), None, (6.01, 1.96, 1.0)),
+    ("hard", 10): (None, (10.77, 3.51, 1.0), None, (7.24, 1.52, 1.0)),
+    ("hard", 20): (None, (11.96, 3.31, 1.0), None, (8.36, 1.58, 1.0)),
+}
+
+#: Table II's method columns (the same as Table I's)
+TABLE2_METHODS = TABLE1_METHODS
 
 #: the paper's four scenes, in its order (set beside SafeApartment0-v0 ... SafeApartment3-v0)
 TABLE2_SCENES = ("SC2 Staging 08", "SC3 Staging 05", "SC3 Staging 11", "SC3 Staging 15")
@@ -58,4 +81,4 @@ TABLE2: Dict[Tuple[str, str, int], Tuple[Cell, Cell, Cell, Cell]] = {
     ('SC3 Staging 15', 'hard', 10): (None, (19.7, 3.73, 0.84), None, (12.85, 2.12, 0.98)),
 }
 
-__all__ = ["TABLE2", "TABLE2_METHODS", "TABLE2_SCENES"]
+__all__ = ["TABLE1", "TABLE1_METHODS", "TABLE2", "TABLE2_METHODS", "TABLE2_SCENES"]

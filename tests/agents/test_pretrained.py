@@ -92,3 +92,19 @@ def test_shipped_apartment_agents_load_and_see_distances(env_id):
         assert actions.shape == (60, 2) and np.all(np.abs(actions) <= 1.0)
         rho = spearmanr(m.distance(obs_s, obs_g), geo).statistic
         assert rho > 0.6, f"{env_id} {kind}: Spearman {rho:.3f}"
+
+
+def test_centerdot_agents_are_shipped_and_the_constrained_one_is_safer():
+    """The setting of the paper's Table I: both stages load, reach nearby goals, and the
+    fine-tuned agent pays less cost on the same problems."""
+    env_id = "SafeCenterDot-v0"
+    env = gym.make(env_id)
+    s, g, _ = sample_problems(env, 40, np.random.default_rng(5), max_distance=10.0)
+    out = {}
+    for kind in KINDS:
+        assert os.path.getsize(pretrained_path(env_id, kind)) < 5_000_000
+        m = load_pretrained(env_id, kind)
+        assert m.env_id == env_id and m.constrained == (kind == "constrained")
+        out[kind] = run_episodes(m, env, s, g)
+        assert out[kind]["success"].mean() >= 0.9
+    assert out["constrained"]["cost"].mean() < out["unconstrained"]["cost"].mean()
