@@ -109,7 +109,7 @@ def execute(
     starts: np.ndarray,
     goals: np.ndarray,
     seed: int = 0,
-    reach_threshold: float = 2.0,
+    reach_threshold: Optional[float] = None,
     safety_radius: float = 2.0,
     hold: Optional[str] = None,
     ban_radius: float = 3.0,

@@ -182,3 +182,22 @@ def test_one_pruning_rule_for_the_buffer_graph_and_the_problem_graph(agent, node
     again = build_problem_graph(nodes, D, C, agent.pairwise, nodes[:2] + 0.001, nodes[2:4] + 0.001, d_max=9.0,
                                 c_max=0.3, relax_cost=False)
     assert (again.graph.distance != problem.graph.distance).nnz == 0
+
+
+def test_the_reach_threshold_default_follows_the_observation_type(agent):
+    """Panorama critics predict more than 2 steps to a goal already within the goal radius
+    often enough that waypoints would go unnoticed: their default threshold is larger."""
+    from types import SimpleNamespace
+
+    from gymnasium import spaces
+
+    from agents.search.policy import PANORAMA_REACH_THRESHOLD, REACH_THRESHOLD, default_reach_threshold
+
+    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
+    vector = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
+    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
+    vec = SimpleNamespace(observation_space=spaces.Dict({"observation": vector, "desired_goal": vector}))
+    assert default_reach_threshold(pano) == PANORAMA_REACH_THRESHOLD > REACH_THRESHOLD
+    assert default_reach_threshold(vec) == REACH_THRESHOLD == default_reach_threshold(agent)
+    assert SearchPolicy(None, agent).reach_threshold == REACH_THRESHOLD
+    assert SearchPolicy(None, agent, reach_threshold=1.5).reach_threshold == 1.5
