@@ -61,6 +61,7 @@ from .constraints import (
     CompiledConstraints,
     Constraint,
     ConstraintSet,
+    DeadlineConstraint,
     EdgeConstraint,
     LengthConstraint,
     RangeConstraint,
@@ -71,12 +72,13 @@ from .ctnode import CTNode
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
 from .result import STATUSES, CBSResult, CBSStats
-from .solver import DEFAULT_MEMORY_LIMIT_MB, HEURISTICS, CBSSolver, solve_cbs
+from .solver import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_MERGE_THRESHOLD, HEURISTICS, CBSSolver, solve_cbs
 from .validate import validate
 
 __all__ = [
     "CARDINAL", "CBSResult", "CBSSolver", "CBSStats", "CTNode", "CompiledConstraints", "Conflict", "Constraint",
-    "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "EDGE", "EMPTY", "EdgeConstraint", "FOREVER", "GridInstance",
+    "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "DEFAULT_MERGE_THRESHOLD", "DeadlineConstraint", "EDGE", "EMPTY",
+    "EdgeConstraint", "FOREVER", "GridInstance",
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
     "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "load_instance", "load_map",
