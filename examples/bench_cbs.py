@@ -17,7 +17,9 @@ improvements switched off (``vanilla=True``). ``--merge-threshold B`` (``none``:
 and ``--no-disjoint-target`` change the default CBS's options. ``--ablation`` runs every
 instance with the solvers of :data:`SOLVERS`: the vanilla CBS, the default one, the default one
 with each new technique off in turn (``no-merge``: ``merge_threshold=None``; ``no-disjoint``:
-``disjoint_target=False``) and with both off (``no-new``: the solver before them), and prints
+``disjoint_target=False``), with merging on any map (``merge-any``: ``merge_space_limit=None``;
+by default only meta-agents with few joint configurations are formed, i.e. on tiny maps) and
+with both techniques off (``no-new``: the solver before them), and prints
 per solver the instances solved, the median and worst time and the high-level expansions
 (total over the instances, and the lower bound reached on each unsolved one). ``--tiny`` adds
 the instances of ``tiny/`` under the data folder (every ``.map`` there with its ``.scen``, all
@@ -67,6 +69,7 @@ SOLVERS: Dict[str, Dict[str, Any]] = {
     "vanilla": {"vanilla": True},
     "cbs": {},
     "no-merge": {"merge_threshold": None},
+    "merge-any": {"merge_space_limit": None},
     "no-disjoint": {"disjoint_target": False},
     "no-new": {"merge_threshold": None, "disjoint_target": False},
 }

@@ -27,6 +27,7 @@ from .conflicts import (
     pair_conflicts,
 )
 from .constraints import (
+    EMPTY,
     FOREVER,
     Constraint,
     ConstraintSet,
@@ -43,6 +44,9 @@ from .heuristics import ANCESTORS, INFEASIBLE, ConflictGraphHeuristics
 from .lowlevel import earliest_arrival, space_time_astar
 from .mdd import MDD, build_mdd, prune_mdd
 from .paths import AgentPath, Reservation, satisfies
+
+#: coupled searches may always expand this many states in a solve (see ``merge_budget``)
+MERGE_BASE_STATES = 250_000
 
 #: A branch's constraints by local agent: ``{i: (its new constraint set, the constraints added)}``.
 Changes = Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]
@@ -61,7 +65,11 @@ class CBSSearch(ConflictGraphHeuristics):
     them into one meta-agent planned by the coupled search of :mod:`agents.search.mapf.coupled`
     under its members' constraints (``None``: never merge); a coupled search stops after
     ``merge_node_limit`` expansions and that merge is not tried again; no meta-agent grows past
-    ``merge_max_agents`` members. ``disjoint_target``
+    ``merge_max_agents`` members, nor any whose joint configurations (nodes to the power of
+    its members) outnumber ``merge_space_limit`` (``None``: no limit). Coupled searches may
+    expand :data:`MERGE_BASE_STATES` plus ``merge_budget`` times as many states as the other
+    low-level searches; past that no merge is made and meta-agents that need replanning are
+    split up again. ``disjoint_target``
     (unit time, with target reasoning): split target conflicts disjointly (see
     :meth:`_target_branches`).
     """
@@ -71,7 +79,8 @@ class CBSSearch(ConflictGraphHeuristics):
                  node_limit: Optional[int], sub: bool = False,
                  init_paths: Optional[List[AgentPath]] = None, symmetry: bool = True,
                  merge_threshold: Optional[int] = None, merge_node_limit: int = 100_000,
-                 merge_max_agents: int = 4, disjoint_target: bool = False):
+                 merge_max_agents: int = 4, merge_budget: float = 0.5, merge_space_limit: Optional[int] = None,
+                 disjoint_target: bool = False):
         self.ctx = ctx
         self.inst = ctx.inst
         self.agents = agents
@@ -92,8 +101,14 @@ class CBSSearch(ConflictGraphHeuristics):
         self.merge_threshold = merge_threshold if unit else None
         self.merge_node_limit = merge_node_limit
         self.merge_max_agents = merge_max_agents
+        self.merge_budget = merge_budget
+        self.merge_space_limit = merge_space_limit
+        #: low-level expansions of the coupled searches so far
+        self.coupled_expanded = 0
         #: split target conflicts disjointly (unit time; see :meth:`_target_branches`)
         self.disjoint_target = disjoint_target and target_reasoning and unit
+        #: set when a coupled search proved that some agents cannot all reach their goals at all
+        self.proven_infeasible = False
         #: per pair of agents (global ids), how many of the splits so far were on their conflicts
         self.conflict_counts: Dict[Tuple[int, int], int] = {}
         #: meta-agents (global ids) whose coupled search ran past ``merge_node_limit``
@@ -411,6 +426,8 @@ class CBSSearch(ConflictGraphHeuristics):
             if not self.sub:
                 stats.hl_expanded += 1
             children = self._expand(node)
+            if self.proven_infeasible:
+                return "infeasible", None
             if children is None:  # bypass: the node got better paths, look at it again
                 heapq.heappush(open_list, node)
                 continue
@@ -500,10 +517,13 @@ class CBSSearch(ConflictGraphHeuristics):
         for mem in units:
             if len(mem) > 1:
                 try:
+                    if not self._merging_affordable():
+                        raise CoupledLimit
                     ps = self._plan_group(mem, cons_list, paths)
                 except CoupledLimit:
-                    # too hard to plan jointly under these constraints: the members go back to
-                    # being planned alone (plain CBS splits resolve their conflicts again)
+                    # too hard to plan jointly under these constraints (or the coupled searches
+                    # have had their share of the work): the members go back to being planned
+                    # alone (plain CBS splits resolve their conflicts again)
                     self.merge_failed.add(frozenset(self.agents[i] for i in mem))
                     assert groups is not None  # a group of several members
                     glist = list(groups)
@@ -573,6 +593,13 @@ class CBSSearch(ConflictGraphHeuristics):
         groups = node.groups
         return (i,) if groups is None else groups[i]
 
+    def _merging_affordable(self) -> bool:
+        """Whether coupled searches may still run: they have expanded at most
+        ``MERGE_BASE_STATES + merge_budget * (the other low-level expansions)`` states so far."""
+        spent = self.coupled_expanded
+        others = self.ctx.counter.expanded - spent
+        return spent <= MERGE_BASE_STATES + self.merge_budget * others
+
     def _plan_group(self, members: Tuple[int, ...], cons: Sequence[ConstraintSet],
                     paths: Sequence[Optional[AgentPath]]) -> Optional[List[AgentPath]]:
         """The cheapest joint paths of a meta-agent under its members' constraints (coupled
@@ -596,11 +623,14 @@ class CBSSearch(ConflictGraphHeuristics):
         res = Reservation(others, -1, self.inst) if len(paths) > len(members) else None
         if len(ctx.coupled) > 50_000:
             ctx.coupled.clear()
+        before = ctx.counter.expanded
         try:
             out = coupled_astar(self.inst, gids, ccs, res, ctx.deadline, ctx.counter, self.merge_node_limit)
         except CoupledLimit as e:
             ctx.coupled[key] = e
             raise
+        finally:
+            self.coupled_expanded += ctx.counter.expanded - before
         if out is None:
             ctx.coupled[key] = None
             return None
@@ -634,16 +664,26 @@ class CBSSearch(ConflictGraphHeuristics):
             for j in g2:
                 x, y = self.agents[i], self.agents[j]
                 total += counts.get((x, y) if x < y else (y, x), 0)
-        if self.merge_threshold is None or total <= self.merge_threshold:
+        if self.merge_threshold is None or total <= self.merge_threshold or not self._merging_affordable():
             return "split"
         members = tuple(sorted(g1 + g2))
         if len(members) > self.merge_max_agents:
+            return "split"
+        if self.merge_space_limit is not None and self.inst.n_nodes ** len(members) > self.merge_space_limit:
             return "split"
         gkey = frozenset(self.agents[i] for i in members)
         if gkey in self.merge_failed:
             return "split"
         ctx = self.ctx
         try:
+            if not self.sub and any(len(node.cons[i]) for i in members):
+                # first the members alone without constraints (memoised): no joint plan proves
+                # the whole instance infeasible
+                if self._plan_group(members, [EMPTY] * len(node.cons), node.paths) is None:
+                    ids = ", ".join(str(self.agents[i]) for i in members)
+                    ctx.infeasible_reason = f"agents {ids} cannot all reach their goals, even ignoring the others"
+                    self.proven_infeasible = True
+                    return "dead"
             planned = self._plan_group(members, node.cons, node.paths)
         except CoupledLimit:
             self.merge_failed.add(gkey)

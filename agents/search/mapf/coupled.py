@@ -92,14 +92,14 @@ def coupled_astar(
     h0 = sum(h_of(m, starts[m], 0) for m in range(k))
     start: _Node = (0, 0, starts, (), 0, None)
     seq = 0
-    heap: List[Tuple[int, int, int, int, _Node]] = [(h0, 0, h0, seq, start)]
+    heap: List[Tuple[int, int, int, int, _Node]] = [(h0, h0, 0, seq, start)]
     # key -> (g, conflicts) of the best entry pushed
     best: Dict[Tuple, Tuple[int, int]] = {(0, 0, starts, (), 0): (0, 0)}
     closed = set()
     pops = 0
     clock = CLOCK_CHECK_MASK
     while heap:
-        f, nc, hh, _, node = heapq.heappop(heap)
+        f, hh, nc, _, node = heapq.heappop(heap)
         t, j, pos, old, done, _parent = node
         key = (min(t, L), j, pos, old, done)
         if key in closed:
@@ -193,7 +193,7 @@ def coupled_astar(
                 continue
             best[ckey] = (ng, nnc)
             seq += 1
-            heapq.heappush(heap, (ng + nh, nnc, nh, seq, (child_t, child_j, npos, child_old, ndone, node)))
+            heapq.heappush(heap, (ng + nh, nh, nnc, seq, (child_t, child_j, npos, child_old, ndone, node)))
     counter.expanded += pops
     return None
 

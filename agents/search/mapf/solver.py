@@ -28,6 +28,8 @@ from .symmetry import GridGeometry
 HEURISTICS = ("none", "cg", "dg", "wdg")
 #: default ``merge_threshold`` of meta-agent CBS
 DEFAULT_MERGE_THRESHOLD = 10
+#: default ``merge_space_limit`` of meta-agent CBS (joint configurations of a meta-agent)
+DEFAULT_MERGE_SPACE_LIMIT = 2_000
 #: default ``memory_limit_mb``: how much a search may grow the process (MiB)
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
@@ -102,6 +104,17 @@ class CBSSolver:
             search passes it in a child is split up again there (its members planned alone).
         merge_max_agents: no meta-agent gets more members than this (the coupled search grows
             exponentially with them); their conflicts are split as usual.
+        merge_budget: the coupled searches of a solve may expand 50,000 states plus this many
+            times the states the other low-level searches expanded; past that no merge is made
+            and a meta-agent that must be replanned is split up again (its members planned
+            alone), so that merging costs a bounded share of the search on instances where it
+            does not pay. The count is of states, not seconds: the same input gives the same
+            search.
+        merge_space_limit: merge only into meta-agents whose joint configurations (graph nodes
+            to the power of the members) number at most this (``None``: no limit). The default
+            keeps merging to tiny, tightly coupled instances (three agents on up to 12 nodes, two
+            on up to 44): on the MovingAI benchmark maps a meta-agent's members lose their MDDs
+            and WDG edges, and merging was measured to slow the search down several times.
         disjoint_target: split a target conflict (``a1`` parked at its goal ``x`` at ``t``,
             ``a2`` there) disjointly: "``a1`` arrives after ``t``" | "``a1`` arrives at or before
             ``t`` and no agent is at ``x`` from ``t`` on" (instead of "``a2`` alone is never at
@@ -133,6 +146,8 @@ class CBSSolver:
         merge_threshold: Optional[int] = DEFAULT_MERGE_THRESHOLD,
         merge_node_limit: int = 100_000,
         merge_max_agents: int = 4,
+        merge_budget: float = 0.5,
+        merge_space_limit: Optional[int] = DEFAULT_MERGE_SPACE_LIMIT,
         disjoint_target: bool = True,
     ) -> None:
         if isinstance(instance, MapfInstance):
@@ -160,6 +175,10 @@ class CBSSolver:
             raise ValueError(f"merge_node_limit must be >= 1, got {merge_node_limit!r}")
         if merge_max_agents < 2:
             raise ValueError(f"merge_max_agents must be >= 2, got {merge_max_agents!r}")
+        if merge_space_limit is not None and merge_space_limit < 1:
+            raise ValueError(f"merge_space_limit must be >= 1 (or None for no limit), got {merge_space_limit!r}")
+        if not (merge_budget >= 0):
+            raise ValueError(f"merge_budget must be >= 0, got {merge_budget!r}")
         if vanilla:
             heuristic, prioritize, bypass, target_reasoning, symmetry = "none", False, False, False, False
             merge_threshold, disjoint_target = None, False
@@ -179,6 +198,8 @@ class CBSSolver:
         self.merge_threshold = None if merge_threshold is None else int(merge_threshold)
         self.merge_node_limit = int(merge_node_limit)
         self.merge_max_agents = int(merge_max_agents)
+        self.merge_budget = float(merge_budget)
+        self.merge_space_limit = None if merge_space_limit is None else int(merge_space_limit)
         self.disjoint_target = bool(disjoint_target)
 
     # -------------------------------------------------------------- checks
@@ -257,6 +278,7 @@ class CBSSolver:
                                target_reasoning=self.target_reasoning, node_limit=self.node_limit,
                                symmetry=self.symmetry, merge_threshold=self.merge_threshold,
                                merge_node_limit=self.merge_node_limit, merge_max_agents=self.merge_max_agents,
+                               merge_budget=self.merge_budget, merge_space_limit=self.merge_space_limit,
                                disjoint_target=self.disjoint_target)
             run = search.run
         try:
