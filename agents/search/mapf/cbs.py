@@ -5,8 +5,10 @@ semi-cardinal, classified with MDDs), bypass, target reasoning, corridor and rec
 (:mod:`agents.search.mapf.symmetry`) and the admissible heuristics of
 :mod:`agents.search.mapf.heuristics`. With a heuristic the conflict to split is chosen f-aware:
 first the splits whose children get larger lower bounds; a child that must raise its agent's
-cost is planned only when it is popped. The same class solves the two-agent sub-problems of
-the WDG heuristic. Bounded-suboptimal ECBS is in :mod:`agents.search.mapf.ecbs`.
+cost is planned only when it is popped. Target conflicts can be split disjointly, and agents
+that keep conflicting can be merged into meta-agents (MA-CBS) planned by the coupled search of
+:mod:`agents.search.mapf.coupled`. The same class solves the two-agent sub-problems of the WDG
+heuristic. Bounded-suboptimal ECBS is in :mod:`agents.search.mapf.ecbs`.
 """
 from __future__ import annotations
 
