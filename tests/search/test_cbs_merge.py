@@ -91,7 +91,7 @@ def test_tightly_coupled_tiny_instances_are_solved_optimally_and_fast(name, text
     adj = adjacency(n, edges)
     t0 = time.perf_counter()
     res = solve_cbs(adj, starts, goals, time_limit=10)
-    assert time.perf_counter() - t0 < 1.0, name
+    assert time.perf_counter() - t0 < 3.0, name  # about 0.3 s for pocket; slack for a loaded machine
     assert res.status == "optimal" and res.soc == expected, (name, res.status, res.soc, expected)
     assert validate(adj, starts, goals, res.paths) == []
     for kw in ({"merge_threshold": 0}, {"merge_threshold": 1, "disjoint_target": False},
@@ -113,7 +113,7 @@ def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name, text, a
         t0 = time.perf_counter()
         res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
         assert res.status == "infeasible", (name, kw, res.status, res.message)
-        assert time.perf_counter() - t0 < 2.0
+        assert time.perf_counter() - t0 < 3.0
     # without merging the search cannot prove it and runs into its limit
     res = solve_cbs(adj, starts, goals, time_limit=10, node_limit=100, merge_threshold=None)
     assert res.status == "timeout"
