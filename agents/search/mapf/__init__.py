@@ -33,9 +33,16 @@ Algorithm
     of the weighted conflict graph lowered by its cost increase, the cover recomputed), and a
     child that must raise its agent's cost is planned only when it is popped. Results that
     depend only on constraints (MDDs, pair sub-problems) are cached by constraint content.
+    Target conflicts are split disjointly ("the parked agent arrives later" | "it arrives by
+    then and nobody is at its goal from then on", ``disjoint_target``). Unit time, meta-agent
+    CBS (``merge_threshold``): two (meta-)agents whose conflicts have been split more than the
+    threshold merge into one meta-agent, planned by an optimal coupled search (A* with
+    operator decomposition, :mod:`agents.search.mapf.coupled`), which solves tightly coupled
+    tiny instances and proves infeasibility where no pair of agents alone can; by default only
+    meta-agents with few joint configurations are formed (``merge_space_limit``).
     ``suboptimality=w > 1`` switches to ECBS (focal search at both levels; the returned cost is
     at most ``w`` times the optimum). ``vanilla=True`` turns prioritisation, bypass, target and
-    symmetry reasoning and the heuristic off.
+    symmetry reasoning, merging and the heuristic off.
 
 Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
@@ -50,9 +57,10 @@ Modules, one concept each
     suboptimal), ``heuristics`` (conflict graphs and their vertex covers), ``ctnode`` (the
     constraint-tree node), ``context`` (caches and limits of one solve), ``mdd``, ``paths``
     (timed paths and reservations), ``conflicts`` (conflict types and detection),
-    ``lowlevel`` (space-time A*, focal search, earliest arrival), ``successors`` (what the
-    low-level searches share), ``constraints``, ``symmetry`` (corridor and rectangle
-    reasoning), ``instance``, ``validate`` and ``movingai`` (benchmark files).
+    ``lowlevel`` (space-time A*, focal search, earliest arrival), ``coupled`` (the joint
+    search of a meta-agent), ``successors`` (what the low-level searches share),
+    ``constraints``, ``symmetry`` (corridor and rectangle reasoning), ``instance``, ``validate``
+    and ``movingai`` (benchmark files).
 """
 from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict
 from .constraints import (
@@ -61,6 +69,7 @@ from .constraints import (
     CompiledConstraints,
     Constraint,
     ConstraintSet,
+    DeadlineConstraint,
     EdgeConstraint,
     LengthConstraint,
     RangeConstraint,
@@ -71,12 +80,13 @@ from .ctnode import CTNode
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
 from .result import STATUSES, CBSResult, CBSStats
-from .solver import DEFAULT_MEMORY_LIMIT_MB, HEURISTICS, CBSSolver, solve_cbs
+from .solver import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_MERGE_THRESHOLD, HEURISTICS, CBSSolver, solve_cbs
 from .validate import validate
 
 __all__ = [
     "CARDINAL", "CBSResult", "CBSSolver", "CBSStats", "CTNode", "CompiledConstraints", "Conflict", "Constraint",
-    "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "EDGE", "EMPTY", "EdgeConstraint", "FOREVER", "GridInstance",
+    "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "DEFAULT_MERGE_THRESHOLD", "DeadlineConstraint", "EDGE", "EMPTY",
+    "EdgeConstraint", "FOREVER", "GridInstance",
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
     "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "load_instance", "load_map",

@@ -5,14 +5,16 @@ semi-cardinal, classified with MDDs), bypass, target reasoning, corridor and rec
 (:mod:`agents.search.mapf.symmetry`) and the admissible heuristics of
 :mod:`agents.search.mapf.heuristics`. With a heuristic the conflict to split is chosen f-aware:
 first the splits whose children get larger lower bounds; a child that must raise its agent's
-cost is planned only when it is popped. The same class solves the two-agent sub-problems of
-the WDG heuristic. Bounded-suboptimal ECBS is in :mod:`agents.search.mapf.ecbs`.
+cost is planned only when it is popped. Target conflicts can be split disjointly, and agents
+that keep conflicting can be merged into meta-agents (MA-CBS) planned by the coupled search of
+:mod:`agents.search.mapf.coupled`. The same class solves the two-agent sub-problems of the WDG
+heuristic. Bounded-suboptimal ECBS is in :mod:`agents.search.mapf.ecbs`.
 """
 from __future__ import annotations
 
 import heapq
 import time as _time
-from typing import List, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Set, Tuple, Union
 
 from .conflicts import (
     CARDINAL,
@@ -27,20 +29,31 @@ from .conflicts import (
     pair_conflicts,
 )
 from .constraints import (
+    EMPTY,
     FOREVER,
     Constraint,
     ConstraintSet,
+    DeadlineConstraint,
     EdgeConstraint,
     LengthConstraint,
     RangeConstraint,
     VertexConstraint,
 )
 from .context import SearchContext
+from .coupled import CoupledLimit, coupled_astar
 from .ctnode import ConflictMap, CTNode
 from .heuristics import ANCESTORS, INFEASIBLE, ConflictGraphHeuristics
 from .lowlevel import earliest_arrival, space_time_astar
 from .mdd import MDD, build_mdd, prune_mdd
-from .paths import AgentPath, Reservation
+from .paths import AgentPath, Reservation, satisfies
+
+#: coupled searches may always expand this many states in a solve (see ``merge_budget``)
+MERGE_BASE_STATES = 250_000
+
+#: A branch's constraints by local agent: ``{i: (its new constraint set, the constraints added)}``.
+Changes = Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]
+#: A planned child: ``(paths, constraint sets, g, conflicts, meta-agents)``.
+ChildParts = Tuple[List[AgentPath], List[ConstraintSet], int, ConflictMap, Optional[Tuple[Tuple[int, ...], ...]]]
 
 
 class CBSSearch(ConflictGraphHeuristics):
@@ -48,12 +61,28 @@ class CBSSearch(ConflictGraphHeuristics):
 
     ``agents`` are the global ids of the agents it plans (its local agent ``i`` is ``agents[i]``),
     ``init_cons`` their constraint sets at the root; a sub-search starts from ``init_paths``.
+
+    ``merge_threshold`` (unit time): meta-agent CBS. When the splits on conflicts between two
+    (meta-)agents number more than this in the whole search, the node being expanded merges
+    them into one meta-agent planned by the coupled search of :mod:`agents.search.mapf.coupled`
+    under its members' constraints (``None``: never merge); a coupled search stops after
+    ``merge_node_limit`` expansions and that merge is not tried again; no meta-agent grows past
+    ``merge_max_agents`` members, nor any whose joint configurations (nodes to the power of
+    its members) outnumber ``merge_space_limit`` (``None``: no limit). Coupled searches may
+    expand :data:`MERGE_BASE_STATES` plus ``merge_budget`` times as many states as the other
+    low-level searches; past that no merge is made and meta-agents that need replanning are
+    split up again. ``disjoint_target``
+    (unit time, with target reasoning): split target conflicts disjointly (see
+    :meth:`_target_branches`).
     """
 
     def __init__(self, ctx: SearchContext, agents: List[int], init_cons: List[ConstraintSet], *,
                  heuristic: str, prioritize: bool, bypass: bool, target_reasoning: bool,
                  node_limit: Optional[int], sub: bool = False,
-                 init_paths: Optional[List[AgentPath]] = None, symmetry: bool = True):
+                 init_paths: Optional[List[AgentPath]] = None, symmetry: bool = True,
+                 merge_threshold: Optional[int] = None, merge_node_limit: int = 100_000,
+                 merge_max_agents: int = 4, merge_budget: float = 0.5, merge_space_limit: Optional[int] = None,
+                 disjoint_target: bool = False):
         self.ctx = ctx
         self.inst = ctx.inst
         self.agents = agents
@@ -69,6 +98,23 @@ class CBSSearch(ConflictGraphHeuristics):
         self.symmetry = symmetry
         self.lower_bound = 0
         self.expanded = 0
+        #: merge two (meta-)agents once they have conflicted more than this many times (None: never)
+        unit = ctx.inst.unit
+        self.merge_threshold = merge_threshold if unit else None
+        self.merge_node_limit = merge_node_limit
+        self.merge_max_agents = merge_max_agents
+        self.merge_budget = merge_budget
+        self.merge_space_limit = merge_space_limit
+        #: low-level expansions of the coupled searches so far
+        self.coupled_expanded = 0
+        #: split target conflicts disjointly (unit time; see :meth:`_target_branches`)
+        self.disjoint_target = disjoint_target and target_reasoning and unit
+        #: set when a coupled search proved that some agents cannot all reach their goals at all
+        self.proven_infeasible = False
+        #: per pair of agents (global ids), how many of the splits so far were on their conflicts
+        self.conflict_counts: Dict[Tuple[int, int], int] = {}
+        #: meta-agents (global ids) whose coupled search ran past ``merge_node_limit``
+        self.merge_failed: Set[frozenset] = set()
 
     # -------------------------------------------------------------- low level
     def _plan(self, i: int, cons: ConstraintSet, paths: Sequence[Optional[AgentPath]]) -> Optional[AgentPath]:
@@ -98,7 +144,8 @@ class CBSSearch(ConflictGraphHeuristics):
         """The two-agent CBS of the pair (i, j) under the node's constraints (WDG heuristic)."""
         sub = CBSSearch(self.ctx, [self.agents[i], self.agents[j]], [node.cons[i], node.cons[j]], heuristic="cg",
                         prioritize=True, bypass=True, target_reasoning=self.tr, node_limit=node_limit, sub=True,
-                        init_paths=[node.paths[i], node.paths[j]], symmetry=self.symmetry)
+                        init_paths=[node.paths[i], node.paths[j]], symmetry=self.symmetry,
+                        disjoint_target=self.disjoint_target)
         status, best = sub.run()
         return status, best, sub.lower_bound
 
@@ -170,8 +217,9 @@ class CBSSearch(ConflictGraphHeuristics):
             return c.cls
         (i1, cons1), (i2, cons2) = c.branches(self.tr)
         l1, l2 = self.local[i1], self.local[i2]
-        c.card1 = self._raises_cost(node, l1, cons1)
-        c.card2 = self._raises_cost(node, l2, cons2)
+        # a member of a meta-agent has no MDD of its own: its side is not known to raise the cost
+        c.card1 = len(self._members(node, l1)) == 1 and self._raises_cost(node, l1, cons1)
+        c.card2 = len(self._members(node, l2)) == 1 and self._raises_cost(node, l2, cons2)
         c.cls = CARDINAL if (c.card1 and c.card2) else (SEMI_CARDINAL if (c.card1 or c.card2) else NON_CARDINAL)
         return c.cls
 
@@ -181,6 +229,8 @@ class CBSSearch(ConflictGraphHeuristics):
         if c.kind not in (VERTEX, EDGE):
             return None
         l1, l2 = self.local[c.a1], self.local[c.a2]
+        if len(self._members(node, l1)) > 1 or len(self._members(node, l2)) > 1:
+            return None  # the splits read the agents' own MDDs
         p1, p2 = node.paths[l1], node.paths[l2]
         corridors = ctx.corridors()
         if corridors is not None:
@@ -224,7 +274,7 @@ class CBSSearch(ConflictGraphHeuristics):
         allc = [c for lst in node.conflicts.values() for c in lst]
         allc.sort(key=lambda c: (c.time, c.a1, c.a2))
         if not self.prioritize:
-            return allc[0].branches(self.tr), (False, False)
+            return self._branches(node, allc[0]), (False, False)
         for c in allc:
             self._classify(node, c)
         tr = self.tr
@@ -252,7 +302,7 @@ class CBSSearch(ConflictGraphHeuristics):
                     forced = sym[2]
             if faware:
                 # (how many children get a larger bound, the smaller and the larger child bound)
-                brs = branches if branches is not None else c.branches(self.tr)
+                brs = branches if branches is not None else self._branches(node, c)
                 fs = [self._child_bound(node, self.local[gid], cons, True)[1] if fc else node.f
                       for (gid, cons), fc in zip(brs, forced)]
                 raised = sum(1 for f in fs if f > node.f)
@@ -267,8 +317,43 @@ class CBSSearch(ConflictGraphHeuristics):
         assert best is not None  # there is at least one conflict
         split, forced = best
         if isinstance(split, Conflict):
-            return split.branches(self.tr), forced
+            return self._branches(node, split), forced
         return split, forced
+
+    def _branches(self, node: CTNode, c: Conflict) -> Branches:
+        """The split of a conflict: :meth:`Conflict.branches`, or :meth:`_target_branches`."""
+        if c.kind == TARGET and self.disjoint_target:
+            return self._target_branches(node, c)
+        return c.branches(self.tr)
+
+    def _target_branches(self, node: CTNode, c: Conflict) -> Branches:
+        """The disjoint split of a target conflict: agent ``a1`` (parked at its goal ``x1`` at
+        ``t``) makes its final arrival after ``t`` | it arrives at or before ``t`` and then no
+        other agent is ever at ``x1`` (or, with proximity, near it) from ``t`` on.
+
+        The second branch is ``DeadlineConstraint(a1, t)``, ``a2`` never again at ``x2`` from
+        ``t``, and the same for every other agent whose current path is at a watched node at
+        some step from ``t`` on; agents whose paths keep away get no constraint now (if they
+        later run into the parked ``a1``, the first branch of that conflict is impossible under
+        the deadline and the split is forced). Every solution meets exactly one branch.
+        """
+        a1, a2, t, x1, x2 = c.a1, c.a2, c.time, c.x1, c.x2
+        near = self.inst.near
+        watch = [x1] if near is None else [x1] + near[x1]
+        second: List[Constraint] = [RangeConstraint(a2, x2, t, FOREVER)]
+        for j, p in enumerate(node.paths):
+            b = self.agents[j]
+            if b == a1 or b == a2:
+                continue
+            steps = p.steps
+            assert steps is not None  # unit time
+            later = set(steps[t:]) if t < len(steps) else set()
+            later.add(p.goal)
+            for y in watch:
+                if y in later:
+                    second.append(RangeConstraint(b, y, t, FOREVER))
+        second.append(DeadlineConstraint(a1, t))
+        return [(a1, (LengthConstraint(a1, t),)), (a2, tuple(second))]
 
     # -------------------------------------------------------------- search
     def _root(self) -> Optional[CTNode]:
@@ -343,6 +428,8 @@ class CBSSearch(ConflictGraphHeuristics):
             if not self.sub:
                 stats.hl_expanded += 1
             children = self._expand(node)
+            if self.proven_infeasible:
+                return "infeasible", None
             if children is None:  # bypass: the node got better paths, look at it again
                 heapq.heappush(open_list, node)
                 continue
@@ -353,35 +440,38 @@ class CBSSearch(ConflictGraphHeuristics):
         return "infeasible", None
 
     def _expand(self, node: CTNode) -> Optional[List[CTNode]]:
-        """The children of ``node``, or ``None`` when a bypass improved ``node`` itself.
+        """The children of ``node``, or ``None`` when a bypass or a merge improved ``node`` itself.
 
         A branch known to raise its agent's cost (cardinal side) cannot give a bypass, so its
         child is only created (``pending``), with the parent's bound: it is planned when popped,
         which saves the low-level search of every child the search never reaches.
         """
         branches, forced = self._choose_forced(node)
+        if self.merge_threshold is not None:
+            merged = self._merge(node, branches)
+            if merged == "merged":
+                return None
+            if merged == "dead":
+                return []
         children = []
         for k, (gid, cons) in enumerate(branches):
             i = self.local[gid]
-            new_cons = node.cons[i].add(*cons)
+            changes = self._changes(node, cons)
             if forced[k]:
                 g, f = self._child_bound(node, i, cons, True)
                 child = CTNode(g, [], [], {}, next(self.ctx.ids), node.depth + 1)
                 child.n_conflicts = node.n_conflicts
                 child.f = f
                 child.h = f - g
-                child.pending = (node, i, new_cons)
+                child.pending = (node, changes)
+                child.groups = node.groups
                 children.append(child)
                 continue
-            path = self._plan(i, new_cons, node.paths)
-            if path is None:
+            parts = self._replan(node, changes)
+            if parts is None:
                 continue
-            paths = list(node.paths)
-            paths[i] = path
-            g = node.g - node.paths[i].cost + path.cost
-            conflicts = {p: lst for p, lst in node.conflicts.items() if i not in p}
-            self._detect(i, path, paths, conflicts)
-            if self.use_bypass and g == node.g:
+            paths, cons_list, g, conflicts, groups = parts
+            if self.use_bypass and g == node.g and groups is node.groups:
                 n_new = sum(len(v) for v in conflicts.values())
                 if n_new < node.n_conflicts:
                     # same cost, fewer conflicts, still satisfies the node's constraints: adopt it
@@ -389,32 +479,234 @@ class CBSSearch(ConflictGraphHeuristics):
                     node.set_conflicts(conflicts)
                     self.ctx.stats.bypasses += 1
                     return None
-            cons_list = list(node.cons)
-            cons_list[i] = new_cons
             child = CTNode(g, paths, cons_list, conflicts, next(self.ctx.ids), node.depth + 1)
+            child.groups = groups
             if node.f > child.f:  # path-max: a child's bound is at least its parent's
                 child.h = node.f - child.g
                 child.f = node.f
             children.append(child)
         return children
 
-    def _generate(self, node: CTNode, pending: Tuple[CTNode, int, ConstraintSet]) -> bool:
-        """Plan a pending node's path; False if the constraints leave the agent no path."""
-        parent, i, new_cons = pending
-        node.pending = None
-        path = self._plan(i, new_cons, parent.paths)
-        if path is None:
-            return False
-        paths = list(parent.paths)
-        paths[i] = path
-        conflicts = {p: lst for p, lst in parent.conflicts.items() if i not in p}
-        self._detect(i, path, paths, conflicts)
+    def _changes(self, node: CTNode, cons: Sequence[Constraint]) -> Changes:
+        """A branch's constraints by local agent: ``{i: (new constraint set, added constraints)}``."""
+        added: Dict[int, List[Constraint]] = {}
+        for c in cons:
+            added.setdefault(self.local[c.agent], []).append(c)
+        return {i: (node.cons[i].add(*lst), tuple(lst)) for i, lst in added.items()}
+
+    def _replan(self, parent: CTNode, changes: Changes) -> Optional[ChildParts]:
+        """Plan a child of ``parent`` that adds ``changes``: ``(paths, constraints, g, conflicts,
+        groups)``, or ``None`` when the constraints leave some agent (or meta-agent) no plan.
+
+        Every agent that gets constraints is replanned, with its meta-agent if it has one; under
+        unit time an agent whose path meets all its new constraints keeps it (the path is still
+        a cheapest one under more constraints).
+        """
         cons_list = list(parent.cons)
-        cons_list[i] = new_cons
-        node.g = parent.g - parent.paths[i].cost + path.cost
+        for i, (new, _) in changes.items():
+            cons_list[i] = new
+        paths = list(parent.paths)
+        unit = self.inst.unit
+        units: List[Tuple[int, ...]] = []
+        for i, (_, added) in changes.items():
+            if unit and all(satisfies(parent.paths[i], c) for c in added):
+                continue
+            mem = self._members(parent, i)
+            if mem not in units:
+                units.append(mem)
+        changed: List[int] = []
+        groups = parent.groups
+        for mem in units:
+            if len(mem) > 1:
+                try:
+                    if not self._merging_affordable():
+                        raise CoupledLimit
+                    ps = self._plan_group(mem, cons_list, paths)
+                except CoupledLimit:
+                    # too hard to plan jointly under these constraints (or the coupled searches
+                    # have had their share of the work): the members go back to being planned
+                    # alone (plain CBS splits resolve their conflicts again)
+                    self.merge_failed.add(frozenset(self.agents[i] for i in mem))
+                    assert groups is not None  # a group of several members
+                    glist = list(groups)
+                    for i in mem:
+                        glist[i] = (i,)
+                    groups = tuple(glist)
+                    self.ctx.stats.unmerges += 1
+                else:
+                    if ps is None:
+                        return None
+                    for i, p in zip(mem, ps):
+                        paths[i] = p
+                    changed.extend(mem)
+                    continue
+            for i in mem:
+                alone = self._plan(i, cons_list[i], paths)
+                if alone is None:
+                    return None
+                paths[i] = alone
+                changed.append(i)
+        g = parent.g + sum(paths[i].cost - parent.paths[i].cost for i in changed)
+        conflicts = self._redetect(parent.conflicts, changed, paths)
+        return paths, cons_list, g, conflicts, groups
+
+    def _redetect(self, old: ConflictMap, changed: Sequence[int], paths: Sequence[AgentPath]) -> ConflictMap:
+        """``old`` without the conflicts of the ``changed`` agents, plus those of their new paths."""
+        if len(changed) == 1:
+            i = changed[0]
+            conflicts = {p: lst for p, lst in old.items() if i not in p}
+            self._detect(i, paths[i], paths, conflicts)
+            return conflicts
+        cset = set(changed)
+        conflicts = {p: lst for p, lst in old.items() if p[0] not in cset and p[1] not in cset}
+        done: set = set()
+        inst = self.inst
+        for i in changed:
+            gi = self.agents[i]
+            for j, pj in enumerate(paths):
+                if j == i or j in done:
+                    continue
+                found = pair_conflicts(gi, paths[i], self.agents[j], pj, inst)
+                if found:
+                    conflicts[(i, j) if i < j else (j, i)] = found
+            done.add(i)
+        return conflicts
+
+    def _generate(self, node: CTNode, pending: Tuple[CTNode, Changes]) -> bool:
+        """Plan a pending node's paths; False if the constraints leave an agent no path."""
+        parent, changes = pending
+        node.pending = None
+        parts = self._replan(parent, changes)
+        if parts is None:
+            return False
+        paths, cons_list, g, conflicts, groups = parts
+        node.groups = groups
+        node.g = g
         node.paths = paths
         node.cons = cons_list
         node.set_conflicts(conflicts)
         node.f = max(node.f, node.g)
         node.h = node.f - node.g
         return True
+
+    # -------------------------------------------------------------- meta-agents (MA-CBS)
+    def _members(self, node: CTNode, i: int) -> Tuple[int, ...]:
+        """The local agents planned together with local agent ``i`` (``(i,)`` when it is alone)."""
+        groups = node.groups
+        return (i,) if groups is None else groups[i]
+
+    def _merging_affordable(self) -> bool:
+        """Whether coupled searches may still run: they have expanded at most
+        ``MERGE_BASE_STATES + merge_budget * (the other low-level expansions)`` states so far."""
+        spent = self.coupled_expanded
+        others = self.ctx.counter.expanded - spent
+        return spent <= MERGE_BASE_STATES + self.merge_budget * others
+
+    def _plan_group(self, members: Tuple[int, ...], cons: Sequence[ConstraintSet],
+                    paths: Sequence[Optional[AgentPath]]) -> Optional[List[AgentPath]]:
+        """The cheapest joint paths of a meta-agent under its members' constraints (coupled
+        search), fewest conflicts with the other ``paths``; ``None`` if there are none.
+
+        Memoised by the members' constraint contents (a remembered plan is still a cheapest one;
+        only its conflicts with the other agents may differ)."""
+        ctx = self.ctx
+        gids = [self.agents[i] for i in members]
+        ccs = [ctx.compile(gid, cons[i]) for gid, i in zip(gids, members)]
+        key = (tuple(gids), tuple(cons[i].content for i in members))
+        if key in ctx.coupled:
+            known = ctx.coupled[key]
+            if known is None:
+                return None
+            if isinstance(known, CoupledLimit):
+                raise known
+            return list(known)
+        inside = set(members)
+        others = [None if k in inside else p for k, p in enumerate(paths)]
+        res = Reservation(others, -1, self.inst) if len(paths) > len(members) else None
+        if len(ctx.coupled) > 50_000:
+            ctx.coupled.clear()
+        before = ctx.counter.expanded
+        try:
+            out = coupled_astar(self.inst, gids, ccs, res, ctx.deadline, ctx.counter, self.merge_node_limit)
+        except CoupledLimit as e:
+            ctx.coupled[key] = e
+            raise
+        finally:
+            self.coupled_expanded += ctx.counter.expanded - before
+        if out is None:
+            ctx.coupled[key] = None
+            return None
+        planned = [AgentPath(ev, self.inst) for ev in out]
+        ctx.coupled[key] = tuple(planned)
+        return planned
+
+    def _merge(self, node: CTNode, branches: Branches) -> str:
+        """Count the conflict being split and merge its two (meta-)agents once they have
+        conflicted more than ``merge_threshold`` times in the search.
+
+        Returns ``"merged"`` (the node now plans them as one meta-agent under the same
+        constraints: the same part of the solution space, so it replaces itself), ``"dead"`` (the
+        meta-agent has no plan under the node's constraints: nor has the node) or ``"split"``
+        (no merge: split as usual). A merge whose coupled search passes ``merge_node_limit``
+        expansions is not tried again.
+        """
+        if len(branches) != 2 or not self.inst.unit:
+            return "split"
+        a, b = self.agents[self.local[branches[0][0]]], self.agents[self.local[branches[1][0]]]
+        if a == b:
+            return "split"
+        counts = self.conflict_counts
+        key = (a, b) if a < b else (b, a)
+        counts[key] = counts.get(key, 0) + 1
+        g1, g2 = self._members(node, self.local[a]), self._members(node, self.local[b])
+        if g1 == g2:
+            return "split"
+        total = 0
+        for i in g1:
+            for j in g2:
+                x, y = self.agents[i], self.agents[j]
+                total += counts.get((x, y) if x < y else (y, x), 0)
+        if self.merge_threshold is None or total <= self.merge_threshold or not self._merging_affordable():
+            return "split"
+        members = tuple(sorted(g1 + g2))
+        if len(members) > self.merge_max_agents:
+            return "split"
+        if self.merge_space_limit is not None and self.inst.n_nodes ** len(members) > self.merge_space_limit:
+            return "split"
+        gkey = frozenset(self.agents[i] for i in members)
+        if gkey in self.merge_failed:
+            return "split"
+        ctx = self.ctx
+        try:
+            if not self.sub and any(len(node.cons[i]) for i in members):
+                # first the members alone without constraints (memoised): no joint plan proves
+                # the whole instance infeasible
+                if self._plan_group(members, [EMPTY] * len(node.cons), node.paths) is None:
+                    ids = ", ".join(str(self.agents[i]) for i in members)
+                    ctx.infeasible_reason = f"agents {ids} cannot all reach their goals, even ignoring the others"
+                    self.proven_infeasible = True
+                    return "dead"
+            planned = self._plan_group(members, node.cons, node.paths)
+        except CoupledLimit:
+            self.merge_failed.add(gkey)
+            return "split"
+        ctx.stats.merges += 1
+        if planned is None:
+            return "dead"
+        paths = list(node.paths)
+        for i, p in zip(members, planned):
+            paths[i] = p
+        groups: List[Tuple[int, ...]] = (list(node.groups) if node.groups is not None
+                                         else [(i,) for i in range(len(paths))])
+        for i in members:
+            groups[i] = members
+        node.groups = tuple(groups)
+        node.g = node.g + sum(paths[i].cost - node.paths[i].cost for i in members)
+        node.set_conflicts(self._redetect(node.conflicts, members, paths))
+        node.paths = paths
+        node.f = max(node.f, node.g)
+        node.h = node.f - node.g
+        node.h_done = False
+        node.hedges = None
+        node.hmemo = None
+        return "merged"

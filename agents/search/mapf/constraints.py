@@ -73,7 +73,20 @@ class LengthConstraint:
     time: int
 
 
-Constraint = Union[VertexConstraint, EdgeConstraint, RangeConstraint, LengthConstraint]
+@dataclass(frozen=True, slots=True)
+class DeadlineConstraint:
+    """``agent`` must make its final arrival at its goal at or before ``time`` (unit time).
+
+    The agent is then at its goal at every step from ``time`` on. It is the branch of the
+    disjoint target split in which an agent is parked at its goal from ``time`` at the latest,
+    the complement of ``LengthConstraint(agent, time)``.
+    """
+
+    agent: int
+    time: int
+
+
+Constraint = Union[VertexConstraint, EdgeConstraint, RangeConstraint, LengthConstraint, DeadlineConstraint]
 
 #: ``(TF, hF, late)`` of reaching a node while some nodes close for good (see
 #: :func:`agents.search.mapf.successors.cut_off`): the time from which all are closed, the distances
@@ -139,6 +152,7 @@ class CompiledConstraints:
         goal_min: the final arrival at the goal must be strictly later than this (-1: none).
         t_static: after this step the constraints no longer change with time.
         impossible: the constraints can never be met (e.g. the goal is forbidden for good).
+        deadline: the final arrival must be at or before this (:data:`FOREVER`: none).
         ranges: the finite range constraints ``(node, start, end)`` (they sharpen the heuristic).
         landmarks, forever_h, cut_offs: caches the low-level searches fill in on first use
             (see :mod:`agents.search.mapf.successors`); not part of the comparison.
@@ -150,6 +164,7 @@ class CompiledConstraints:
     goal_min: int
     t_static: int
     impossible: bool = False
+    deadline: int = FOREVER
     ranges: List[Tuple[int, int, int]] = field(default_factory=list)
     landmarks: Optional[Dict[int, List[Tuple[int, int, int]]]] = field(default=None, repr=False, compare=False)
     forever_h: Optional[CutOff] = field(default=None, repr=False, compare=False)
@@ -165,6 +180,7 @@ def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> Compile
     t_static = 0
     impossible = False
     ranges: List[Tuple[int, int, int]] = []
+    deadline = FOREVER
     N = n_nodes
     for c in cons:
         if isinstance(c, VertexConstraint):
@@ -191,7 +207,13 @@ def compile_constraints(cons: ConstraintSet, n_nodes: int, goal: int) -> Compile
                     goal_min = max(goal_min, c.end)
         elif isinstance(c, LengthConstraint):
             goal_min = max(goal_min, c.time)
+        elif isinstance(c, DeadlineConstraint):
+            deadline = min(deadline, c.time)
         else:  # pragma: no cover - guarded by the type
             raise TypeError(f"unknown constraint {c!r}")
     t_static = max(t_static, goal_min + 1)
-    return CompiledConstraints(vset, eset, forever, goal_min, t_static, impossible, ranges)
+    if deadline < FOREVER:
+        t_static = max(t_static, deadline + 1)
+        if deadline <= goal_min:
+            impossible = True
+    return CompiledConstraints(vset, eset, forever, goal_min, t_static, impossible, deadline, ranges)

@@ -10,7 +10,7 @@ import itertools
 import os
 import sys
 import time as _time
-from typing import TYPE_CHECKING, Dict, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple
 
 from .constraints import CompiledConstraints, ConstraintSet, compile_constraints
 from .instance import MapfInstance
@@ -82,6 +82,9 @@ class SearchContext:
         self.arrivals: Dict[Tuple[int, frozenset, int, Optional[int]], int] = {}
         #: (agent, constraint content) -> the compiled constraints
         self.compiled: Dict[AgentKey, CompiledConstraints] = {}
+        #: (meta-agent's global ids, its members' constraint contents) -> its joint plan, ``None``
+        #: (no plan) or the :class:`~agents.search.mapf.coupled.CoupledLimit` its search stopped at
+        self.coupled: Dict[Tuple[Tuple[int, ...], Tuple[frozenset, ...]], Any] = {}
         self.stats = CBSStats()
         self.ids = itertools.count()
         self._corridors: Optional[Corridors] = None

@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Any, Dict, List, Optional, Tuple
 
 from .conflicts import Conflict
-from .constraints import ConstraintSet
+from .constraints import Constraint, ConstraintSet
 from .paths import AgentPath
 
 #: Conflicts of a node by local agent pair ``(i, j)``, ``i < j``.
@@ -22,7 +22,7 @@ class CTNode:
     """
 
     __slots__ = ("g", "h", "f", "id", "depth", "paths", "cons", "conflicts", "n_conflicts", "h_done",
-                 "lb", "closed", "pending", "hedges", "hmemo")
+                 "lb", "closed", "pending", "hedges", "hmemo", "groups")
 
     def __init__(self, g: int, paths: List[AgentPath], cons: List[ConstraintSet],
                  conflicts: ConflictMap, node_id: int, depth: int = 0, h: int = 0):
@@ -38,15 +38,19 @@ class CTNode:
         self.h_done = False
         self.lb = g
         self.closed = False
-        #: ``(parent, local agent, constraint set)`` while the node is not generated yet: its
-        #: path is planned when it is first popped (``g`` and ``f`` are lower bounds until then;
-        #: ``paths`` and ``cons`` are empty)
-        self.pending: Optional[Tuple[CTNode, int, ConstraintSet]] = None
+        #: ``(parent, {local agent: new constraint set})`` while the node is not generated yet:
+        #: its paths are planned when it is first popped (``g`` and ``f`` are lower bounds until
+        #: then; ``paths`` and ``cons`` are empty)
+        self.pending: Optional[Tuple[CTNode, Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]]] = None
         #: the weighted conflict graph ``{(i, j): weight}`` the heuristic was computed from
         self.hedges: Optional[Dict[Tuple[int, int], int]] = None
         #: the cover of ``hedges`` per component and the child bounds computed from it (see
         #: :meth:`agents.search.mapf.heuristics.ConflictGraphHeuristics._cover_memo`)
         self.hmemo: Optional[CoverMemo] = None
+        #: meta-agents (MA-CBS): per local agent, the sorted local agents of its group, planned
+        #: together by the coupled search; ``None`` while every agent is alone (children share
+        #: their parent's tuple)
+        self.groups: Optional[Tuple[Tuple[int, ...], ...]] = None
 
     def set_conflicts(self, conflicts: ConflictMap) -> None:
         """Replace the node's conflicts (and their count)."""

@@ -260,7 +260,13 @@ class ConflictGraphHeuristics:
             return 0
         edges: Edges = {}
         unit = self.inst.unit
+        groups = node.groups
         for (i, j), lst in node.conflicts.items():
+            if groups is not None and (len(groups[i]) > 1 or len(groups[j]) > 1):
+                # a meta-agent's members may trade cost among themselves: only its total cost is
+                # known not to drop, so pairs with a member give no admissible edge; leaving them
+                # out keeps the cover a lower bound
+                continue
             card = self._pair_cardinal(node, lst)
             if self.heuristic == "cg":
                 if card:
@@ -315,8 +321,9 @@ class ConflictGraphHeuristics:
             return node.g, node.f
         cost = node.paths[i].cost
         new = cost + 1
+        gid = self.agents[i]
         for c in cons:
-            if isinstance(c, LengthConstraint) and c.time + 1 > new:
+            if isinstance(c, LengthConstraint) and c.agent == gid and c.time + 1 > new:
                 new = c.time + 1
         d = new - cost
         g = node.g + d

@@ -97,11 +97,14 @@ def space_time_astar(
     gl = goal_min + 1
     lm = landmarks(inst, agent, cc) if cc.ranges else None
     hs = time_aware_h(s, 0, hs, gl, lm)
+    if hs > cc.deadline:
+        return None
     L = horizon(cc, res)
     if inst.unit:
         return _astar_unit(inst, agent, cc, res, deadline, counter, hs, gl, lm, L)
     expand = make_expander(inst, cc, res)
     fb, clock = FIELD_BITS, CLOCK_CHECK_MASK
+    DL = cc.deadline
     heap = [(hs, 0, hs, s)]
     best = {s: hs << fb}
     parent = {s: -1}
@@ -134,6 +137,8 @@ def space_time_astar(
                 continue
             nc = c + dc
             nf = nt + hw
+            if nf > DL:
+                continue
             pk = (nf << fb) | nc
             old = best.get(ncode)
             if old is not None and old <= pk:
@@ -176,6 +181,7 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
     late: List[int] = late_or_none if late_or_none is not None else []
     if late_or_none is not None and late[s] < 0:
         return None
+    DL = cc.deadline
     heap = [(hs << S3) | (hs << S1) | s]
     best = {s: hs << fb}
     parent = {s: -1}
@@ -238,6 +244,8 @@ def _astar_unit(inst: MapfInstance, agent: int, cc: CompiledConstraints, res: Op
                 hw = time_aware_h(w, nt, hw, gl, lm)
             nc = c + dc
             nf = nt + hw
+            if nf > DL:
+                continue
             pk = (nf << fb) | nc
             old = best.get(ncode)
             if old is not None and old <= pk:

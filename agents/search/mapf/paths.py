@@ -21,7 +21,14 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional, Sequence, Set, Tuple
 
-from .constraints import Constraint, EdgeConstraint, LengthConstraint, RangeConstraint, VertexConstraint
+from .constraints import (
+    Constraint,
+    DeadlineConstraint,
+    EdgeConstraint,
+    LengthConstraint,
+    RangeConstraint,
+    VertexConstraint,
+)
 from .instance import MapfInstance
 
 
@@ -171,4 +178,6 @@ def satisfies(path: AgentPath, c: Constraint) -> bool:
         return True
     if isinstance(c, LengthConstraint):
         return T > c.time
+    if isinstance(c, DeadlineConstraint):
+        return T <= c.time
     raise TypeError(f"unknown constraint {c!r}")

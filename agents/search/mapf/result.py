@@ -21,6 +21,10 @@ class CBSStats:
     pair_searches: int = 0
     pair_reuses: int = 0
     bypasses: int = 0
+    #: meta-agent merges (coupled searches run to merge two (meta-)agents in a node)
+    merges: int = 0
+    #: meta-agents split up again in a child whose coupled search passed ``merge_node_limit``
+    unmerges: int = 0
 
 
 @dataclass

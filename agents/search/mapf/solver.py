@@ -26,6 +26,10 @@ from .symmetry import GridGeometry
 
 #: The high-level heuristics of optimal CBS.
 HEURISTICS = ("none", "cg", "dg", "wdg")
+#: default ``merge_threshold`` of meta-agent CBS
+DEFAULT_MERGE_THRESHOLD = 10
+#: default ``merge_space_limit`` of meta-agent CBS (joint configurations of a meta-agent)
+DEFAULT_MERGE_SPACE_LIMIT = 2_000
 #: default ``memory_limit_mb``: how much a search may grow the process (MiB)
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
@@ -87,6 +91,35 @@ class CBSSolver:
         pair_check_states: an exact two-agent feasibility check of every pair (which can prove
             infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
             once the search has run for a second when it is at most 100 times this.
+        merge_threshold: meta-agent CBS (MA-CBS), unit time only: once the splits on conflicts
+            between two agents (or meta-agents: summed over their members) number more than
+            this in the search, the node being split merges them into one meta-agent instead,
+            planned by an optimal coupled search (A* with operator decomposition over the
+            members' joint moves, under their constraints, see :mod:`agents.search.mapf.coupled`);
+            a coupled search that exhausts its states proves the node (at the root: the
+            instance) infeasible. ``None`` turns merging off; ignored under the durative model
+            and by ECBS.
+        merge_node_limit: expansions of each coupled search; a merge whose search passes it is
+            abandoned (not tried again) and the conflict is split as usual; a meta-agent whose
+            search passes it in a child is split up again there (its members planned alone).
+        merge_max_agents: no meta-agent gets more members than this (the coupled search grows
+            exponentially with them); their conflicts are split as usual.
+        merge_budget: the coupled searches of a solve may expand 50,000 states plus this many
+            times the states the other low-level searches expanded; past that no merge is made
+            and a meta-agent that must be replanned is split up again (its members planned
+            alone), so that merging costs a bounded share of the search on instances where it
+            does not pay. The count is of states, not seconds: the same input gives the same
+            search.
+        merge_space_limit: merge only into meta-agents whose joint configurations (graph nodes
+            to the power of the members) number at most this (``None``: no limit). The default
+            keeps merging to tiny, tightly coupled instances (three agents on up to 12 nodes, two
+            on up to 44): on the MovingAI benchmark maps a meta-agent's members lose their MDDs
+            and WDG edges, and merging was measured to slow the search down several times.
+        disjoint_target: split a target conflict (``a1`` parked at its goal ``x`` at ``t``,
+            ``a2`` there) disjointly: "``a1`` arrives after ``t``" | "``a1`` arrives at or before
+            ``t`` and no agent is at ``x`` from ``t`` on" (instead of "``a2`` alone is never at
+            ``x`` from ``t`` on", which overlaps the first branch and needs one split per
+            passing agent). Unit time, with ``target_reasoning``.
     """
 
     def __init__(
@@ -110,6 +143,12 @@ class CBSSolver:
         node_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,
+        merge_threshold: Optional[int] = DEFAULT_MERGE_THRESHOLD,
+        merge_node_limit: int = 100_000,
+        merge_max_agents: int = 4,
+        merge_budget: float = 0.5,
+        merge_space_limit: Optional[int] = DEFAULT_MERGE_SPACE_LIMIT,
+        disjoint_target: bool = True,
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -130,8 +169,19 @@ class CBSSolver:
         if node_limit is not None and node_limit < 0:
             raise ValueError(f"node_limit must be >= 0, got {node_limit!r}")
         self.suboptimality = float(suboptimality)
+        if merge_threshold is not None and merge_threshold < 0:
+            raise ValueError(f"merge_threshold must be >= 0 (or None for no merging), got {merge_threshold!r}")
+        if merge_node_limit < 1:
+            raise ValueError(f"merge_node_limit must be >= 1, got {merge_node_limit!r}")
+        if merge_max_agents < 2:
+            raise ValueError(f"merge_max_agents must be >= 2, got {merge_max_agents!r}")
+        if merge_space_limit is not None and merge_space_limit < 1:
+            raise ValueError(f"merge_space_limit must be >= 1 (or None for no limit), got {merge_space_limit!r}")
+        if not (merge_budget >= 0):
+            raise ValueError(f"merge_budget must be >= 0, got {merge_budget!r}")
         if vanilla:
             heuristic, prioritize, bypass, target_reasoning, symmetry = "none", False, False, False, False
+            merge_threshold, disjoint_target = None, False
         self.heuristic = heuristic
         self.prioritize = prioritize
         self.bypass = bypass
@@ -145,6 +195,12 @@ class CBSSolver:
         self.node_limit = node_limit
         self.pair_node_limit = int(pair_node_limit)
         self.pair_check_states = int(pair_check_states)
+        self.merge_threshold = None if merge_threshold is None else int(merge_threshold)
+        self.merge_node_limit = int(merge_node_limit)
+        self.merge_max_agents = int(merge_max_agents)
+        self.merge_budget = float(merge_budget)
+        self.merge_space_limit = None if merge_space_limit is None else int(merge_space_limit)
+        self.disjoint_target = bool(disjoint_target)
 
     # -------------------------------------------------------------- checks
     def _precheck(self) -> Optional[str]:
@@ -220,7 +276,10 @@ class CBSSolver:
             search = CBSSearch(ctx, list(range(inst.n_agents)), [EMPTY] * inst.n_agents,
                                heuristic=self.heuristic, prioritize=self.prioritize, bypass=self.bypass,
                                target_reasoning=self.target_reasoning, node_limit=self.node_limit,
-                               symmetry=self.symmetry)
+                               symmetry=self.symmetry, merge_threshold=self.merge_threshold,
+                               merge_node_limit=self.merge_node_limit, merge_max_agents=self.merge_max_agents,
+                               merge_budget=self.merge_budget, merge_space_limit=self.merge_space_limit,
+                               disjoint_target=self.disjoint_target)
             run = search.run
         try:
             status, node = run()
