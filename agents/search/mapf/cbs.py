@@ -404,7 +404,7 @@ class CBSSearch(ConflictGraphHeuristics):
                 continue
             if ctx.pair_check_at is not None and not self.sub and _time.perf_counter() > ctx.pair_check_at:
                 ctx.pair_check_at = None
-                ctx.infeasible_reason = ctx.opt._pair_check()
+                ctx.infeasible_reason = ctx.opt._pair_check(ctx.pair_check_deadline())
                 if ctx.infeasible_reason is not None:
                     return "infeasible", None
             if not node.h_done and self.heuristic != "none" and node.conflicts:

@@ -115,6 +115,12 @@ class SearchContext:
             self.compiled[key] = cc
         return cc
 
+    def pair_check_deadline(self) -> float:
+        """When the deferred pair feasibility check gives up undecided: it may use a quarter of
+        the time left, so that it cannot starve a search that would have succeeded."""
+        now = _time.perf_counter()
+        return now + 0.25 * max(0.0, self.deadline - now)
+
     def check_time(self) -> None:
         """Raise :class:`SearchTimeout` past the deadline or (checked now and then) the memory cap."""
         if _time.perf_counter() > self.deadline:

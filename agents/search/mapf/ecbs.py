@@ -71,7 +71,7 @@ class ECBSSearch(CBSSearch):
             ctx.check_time()
             if ctx.pair_check_at is not None and _time.perf_counter() > ctx.pair_check_at:
                 ctx.pair_check_at = None
-                ctx.infeasible_reason = ctx.opt._pair_check()
+                ctx.infeasible_reason = ctx.opt._pair_check(ctx.pair_check_deadline())
                 if ctx.infeasible_reason is not None:
                     return "infeasible", None
             while open_lb and open_lb[0][2].closed:

@@ -34,11 +34,12 @@ DEFAULT_MERGE_SPACE_LIMIT = 2_000
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
 
-def _pair_feasible(inst: MapfInstance, a: int, b: int) -> bool:
+def _pair_feasible(inst: MapfInstance, a: int, b: int, deadline: Optional[float] = None) -> Optional[bool]:
     """Whether agents ``a`` and ``b`` alone can both reach their goals (joint-state search).
 
     Uses unit-time semantics (vertex, swap, proximity), which every durative plan can be
     serialised into, so ``False`` proves the whole instance infeasible under either model.
+    ``None``: the search reached ``deadline`` (a ``time.perf_counter()`` value) undecided.
     """
     succ = inst.succ
     near = inst.near_mat
@@ -46,7 +47,11 @@ def _pair_feasible(inst: MapfInstance, a: int, b: int) -> bool:
     goal = (inst.goals[a], inst.goals[b])
     seen = {start}
     stack = [start]
+    popped = 0
     while stack:
+        popped += 1
+        if deadline is not None and not popped & 4095 and _time.perf_counter() > deadline:
+            return None
         x, y = stack.pop()
         if (x, y) == goal:
             return True
@@ -226,12 +231,17 @@ class CBSSolver:
         k = self.instance.n_agents
         return k * (k - 1) // 2 * self.instance.n_nodes ** 2
 
-    def _pair_check(self) -> Optional[str]:
+    def _pair_check(self, deadline: Optional[float] = None) -> Optional[str]:
+        """Why some pair of agents cannot both reach their goals, or ``None`` (also when the
+        check reaches ``deadline`` undecided: it never makes a search overrun its time limit)."""
         inst = self.instance
         k = inst.n_agents
         for a in range(k):
             for b in range(a + 1, k):
-                if not _pair_feasible(inst, a, b):
+                ok = _pair_feasible(inst, a, b, deadline)
+                if ok is None:  # out of time: undecided
+                    return None
+                if not ok:
                     return f"agents {a} and {b} cannot both reach their goals, even ignoring the others"
         return None
 
