@@ -29,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="edge cost cut-off of the constrained searches: a number, or 'auto' to choose it per "
                         "agent count on validation problems drawn with --validation-seed (never the test "
                         "problems) from --c-max-grid (default: the methods' own, 0.25)")
+    p.add_argument("--c-max-from", default=None, metavar="FILE",
+                   help="reuse the per-agent-count c_max of an earlier --c-max auto (its c_max.json; chosen on "
+                        "validation problems), e.g. to run the agent counts as separate commands")
     p.add_argument("--c-max-grid", type=float, nargs="+", default=None, metavar="C",
                    help="candidates of --c-max auto (default: the 25/50/75%% quantiles of the graph's edge costs)")
     p.add_argument("--validation-problems", type=_positive, default=10, metavar="P",
@@ -140,6 +143,19 @@ def run(args: argparse.Namespace) -> int:
     torch.set_num_threads(1)
     if args.protocol == "paper":
         return _run_paper(args)
+    chosen, sel = None, None
+    if args.c_max_from is not None:
+        if args.c_max is not None:
+            raise ValueError("give --c-max or --c-max-from, not both")
+        meta = json.loads(Path(args.c_max_from).read_text())
+        if meta.get("test_seed") is not None and meta.get("validation_seed") == args.seed:
+            raise ValueError(f"{args.c_max_from} chose c_max on seed {args.seed}, the test seed of this run")
+        chosen = {int(k): float(v) for k, v in meta["chosen"].items()}
+        missing = sorted(set(args.agents) - set(chosen))
+        if missing:
+            raise ValueError(f"{args.c_max_from} has no c_max for agent counts {missing} (it has {sorted(chosen)})")
+        chosen = {k: chosen[k] for k in args.agents}
+        sel = argparse.Namespace(seed=meta.get("validation_seed"))
     methods = get_methods(dict.fromkeys(args.methods or METHODS))
     opts = {}
     if args.c_max is not None and args.c_max != "auto":
@@ -155,8 +171,7 @@ def run(args: argparse.Namespace) -> int:
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
     progress = not args.no_progress and not args.json
     out = Path(args.out)
-    chosen = None
-    if args.c_max == "auto":
+    if chosen is None and args.c_max == "auto":
         constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]
         if not constrained:
             raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")

@@ -1,4 +1,5 @@
 """The evaluation harness: problems, execution in the PettingZoo env, aggregation, the table."""
+import json
 import math
 
 import numpy as np
@@ -117,7 +118,6 @@ def test_unknown_method_is_named():
 
 def test_evaluate_command_with_shipped_checkpoints(tmp_path, capsys):
     """The CLI end to end on a tiny grid: JSON aggregate rows, CSV and Markdown files."""
-    import json
 
     from baselines.cli import main
 
@@ -189,8 +189,6 @@ def test_c_max_is_chosen_on_validation_problems_only(setup, monkeypatch):
 
 
 def test_evaluate_command_c_max_auto_writes_its_choice(tmp_path, capsys):
-    import json
-
     from baselines.cli import main
 
     code = main(["evaluate", "--agents", "1", "2", "--problems", "1", "--difficulty", "hard", "--methods",
@@ -257,3 +255,18 @@ def test_evaluate_names_an_unknown_env_id_before_any_work(tmp_path, capsys):
     assert main(["evaluate", "--env", "Nope-v0", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "unknown env id 'Nope-v0'" in err and "SafeCentralObstacle-v0" in err
+
+
+def test_c_max_from_an_earlier_validation_is_checked_before_any_work(tmp_path, capsys):
+    from baselines.cli import main
+
+    f = tmp_path / "c_max.json"
+    f.write_text(json.dumps({"chosen": {"1": 0.5, "5": 1.0}, "validation_seed": 10000, "test_seed": 0}))
+    out = str(tmp_path / "out")
+    assert main(["evaluate", "--c-max-from", str(f), "--agents", "1", "10", "--out", out]) == 2
+    assert "no c_max for agent counts [10]" in capsys.readouterr().err
+    assert main(["evaluate", "--c-max-from", str(f), "--seed", "10000", "--agents", "1", "--out", out]) == 2
+    assert "test seed of this run" in capsys.readouterr().err
+    assert main(["evaluate", "--c-max-from", str(f), "--c-max", "0.3", "--agents", "1", "--out", out]) == 2
+    assert "not both" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
