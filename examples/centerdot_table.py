@@ -28,11 +28,14 @@ from baselines.methods import METHODS
 from baselines.paper_tables import TABLE1, TABLE1_METHODS
 
 
-def load(folder: Path) -> Dict[Tuple[str, int, str], dict]:
-    """Aggregate rows of a ``safe-mapf evaluate`` folder by (difficulty, agents, method). Under the
-    paper's protocol only the rows of the c_max chosen per cell are kept."""
-    with open(folder / "runs.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
+def load(*folders: Path) -> Dict[Tuple[str, int, str], dict]:
+    """Aggregate the rows of ``safe-mapf evaluate`` folders by (difficulty, agents, method). Under
+    the paper's protocol only the rows of the c_max chosen per cell are kept."""
+    rows: List[dict] = []
+    for folder in folders:
+        with open(folder / "runs.csv", newline="") as f:
+            rows += list(csv.DictReader(f))
+    folder = folders[0]
     if (folder / "c_max.json").exists() and any(r["method"] == "ours" and r["c_max"] != "inf" for r in rows):
         import json
 
@@ -55,9 +58,10 @@ def fmt(mean: Optional[float], std: Optional[float], rate: Optional[float]) -> s
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("paper_folder", type=Path, help="output of safe-mapf evaluate --protocol paper")
-    p.add_argument("strict_folder", type=Path, help="output of safe-mapf evaluate (the strict protocol)")
+    p.add_argument("strict_folders", type=Path, nargs="+",
+                   help="output of safe-mapf evaluate (the strict protocol): one folder, or one per agent count")
     args = p.parse_args()
-    paper_runs, strict = load(args.paper_folder), load(args.strict_folder)
+    paper_runs, strict = load(args.paper_folder), load(*args.strict_folders)
     labels = [METHODS[m].label for m in TABLE1_METHODS]
     lines = ["| Problem | Agents | " + " | ".join(labels) + " |", "|---|---|" + "---|" * len(labels)]
     within: List[str] = []

@@ -189,3 +189,38 @@ def test_paper_protocol_command_refuses_what_does_not_apply(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 2
     assert "ours_budget" in capsys.readouterr().err
     assert not (tmp_path / "c_max.json").exists()
+
+
+def test_centerdot_table_sets_three_numbers_per_cell(setup, tmp_path, capsys, monkeypatch):
+    """examples/centerdot_table.py reads a paper-protocol folder (keeping the chosen c_max only)
+    and strict folders, and prints the paper's number beside both of ours in every cell."""
+    import importlib.util
+    import json
+    import sys
+    from pathlib import Path
+
+    from baselines.evaluation import write_csv
+
+    methods = [METHODS[m] for m in ("unconstrained_policy", "sorb", "constrained_policy", "ours")]
+    rows = evaluate_paper(setup, methods, [1, 5], ["easy"], 2, progress=False, policy_agents=[1], candidates=20)
+    kept, chosen = choose_best_c_max(rows)
+    paper, strict = tmp_path / "paper", tmp_path / "strict"
+    write_csv(rows, paper / "runs.csv")
+    (paper / "c_max.json").write_text(json.dumps(
+        {"chosen_on": "the test problems", "chosen": [{"agents": k, "difficulty": d, "c_max": c}
+                                                      for (k, d), c in chosen.items()]}))
+    write_csv(kept, strict / "runs.csv")
+    path = Path(__file__).resolve().parents[2] / "examples" / "centerdot_table.py"
+    spec = importlib.util.spec_from_file_location("centerdot_table", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(sys, "argv", ["centerdot_table.py", str(paper), str(strict)])
+    module.main()
+    out = capsys.readouterr().out
+    easy5 = next(line for line in out.splitlines() if line.startswith("| Easy | 5 |"))
+    assert easy5.count("<br>") == 8 and "1.68 ± 1.21 (100%)" in easy5  # the paper's ours, easy, 5 agents
+    medium5 = next(line for line in out.splitlines() if line.startswith("| Medium | 5 |"))
+    assert "5.12 ± 3.65 (100%)<br>n/a<br>n/a" in medium5  # the paper's SoRB; nothing of ours was run
+    assert "SoRB + CBS and ours cells" in out and "Strict protocol" in out
+    agg = {(a["method"], a["agents"]): a for a in aggregate(kept)}
+    assert f"{agg[('ours', 5)]['cost_mean']:.2f}" in easy5
