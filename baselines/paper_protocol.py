@@ -155,8 +155,11 @@ class PaperSetup:
         base = self.buffer_graph(method)
         ds = dist_model.pairwise_distance(start_obs, self.observations, aggregate="max", progress=False)
         dg = dist_model.pairwise_distance(self.observations, goal_obs, aggregate="max", progress=False)
-        cs = unc.pairwise_cost(start_obs, self.observations, aggregate="max", progress=False)
-        cg = unc.pairwise_cost(self.observations, goal_obs, aggregate="max", progress=False)
+        if math.isfinite(method.c_max):  # ours: endpoint edges are cut on the unconstrained costs too
+            cs = unc.pairwise_cost(start_obs, self.observations, aggregate="max", progress=False)
+            cg = unc.pairwise_cost(self.observations, goal_obs, aggregate="max", progress=False)
+        else:  # SoRB: distances only
+            cs, cg = np.zeros_like(ds), np.zeros_like(dg)
         routes: List[Optional[np.ndarray]] = []
         for i in range(len(start_obs)):
             first = np.flatnonzero((ds[i] < self.d_max) & (cs[i] < method.c_max))  # start -> node

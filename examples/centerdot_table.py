@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -37,8 +38,6 @@ def load(*folders: Path) -> Dict[Tuple[str, int, str], dict]:
             rows += list(csv.DictReader(f))
     folder = folders[0]
     if (folder / "c_max.json").exists() and any(r["method"] == "ours" and r["c_max"] != "inf" for r in rows):
-        import json
-
         meta = json.loads((folder / "c_max.json").read_text())
         if "chosen_on" in meta:  # the paper's protocol: its best c_max per cell
             chosen = {(c["agents"], c["difficulty"]): float(c["c_max"]) for c in meta["chosen"]}

@@ -162,11 +162,11 @@ class SearchPolicy:
             raise ValueError(f"budget must be > 0 or None, got {budget!r}")
         if not hasattr(policy_model, "predict"):
             raise TypeError(f"the driving model needs a predict() method, got {type(policy_model).__name__}")
-        if not hasattr(distance_model if distance_model is not None else policy_model, "distance"):
+        if not hasattr(judge, "distance"):
             raise TypeError("the model that judges waypoints reached needs a distance() method")
         self.planner = planner
         self.policy_model = policy_model
-        self.distance_model = distance_model if distance_model is not None else policy_model
+        self.distance_model = judge
         self.budget = budget
         self.hold = hold
         self.reach_threshold = float(reach_threshold)

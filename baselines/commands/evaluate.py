@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     torch.set_num_threads(1)
     if args.protocol == "paper":
         return _run_paper(args)
-    chosen, sel = None, None
+    chosen, validation_seed = None, None
     if args.c_max_from is not None:
         if args.c_max is not None:
             raise ValueError("give --c-max or --c-max-from, not both")
@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         if missing:
             raise ValueError(f"{args.c_max_from} has no c_max for agent counts {missing} (it has {sorted(chosen)})")
         chosen = {k: chosen[k] for k in args.agents}
-        sel = argparse.Namespace(seed=meta.get("validation_seed"))
+        validation_seed = meta.get("validation_seed")
     methods = get_methods(dict.fromkeys(args.methods or METHODS))
     opts = {}
     if args.c_max is not None and args.c_max != "auto":
@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
         sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
                            n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
                            max_cycles=args.max_cycles, progress=progress, ray=args.ray)
-        chosen = sel.chosen
+        chosen, validation_seed = sel.chosen, sel.seed
         write_csv(sel.rows, out / "validation_runs.csv")
         (out / "c_max.json").write_text(json.dumps(
             {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     header = (f"{args.env}: largest cumulative cost over agents, mean ± std over successful runs "
               f"(success rate); {args.problems} problems per cell, seed {args.seed}, {wall:.0f} s\n\n")
     if chosen is not None:
-        header += ("c_max chosen on validation problems (seed " + str(sel.seed) + "): "
+        header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
     (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
