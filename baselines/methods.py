@@ -41,6 +41,9 @@ class Method:
         budget: optional per-agent bound on the total predicted cost of a route.
         hold: where an early agent waits for its planned departure time: ``"all"`` waypoints
             or only where the plan ``"waits"``.
+        fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
+            leg once its own policy is stuck there (see
+            :class:`~agents.search.controller.WaypointController`).
     """
 
     name: str
@@ -50,6 +53,7 @@ class Method:
     c_max: float = math.inf
     budget: Optional[float] = None
     hold: str = "waits"
+    fallback: Optional[str] = None
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -133,7 +137,7 @@ def execute(
         planner_m = planner.with_options(c_max=method.c_max) if planner.c_max != method.c_max else planner
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
-                          seed=seed)
+                          seed=seed, fallback_model=models[method.fallback] if method.fallback else None)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)

@@ -4,7 +4,10 @@ Each agent follows its waypoints with a goal-conditioned policy whose goal input
 current waypoint's observation. Rules, all from observations only:
 
 - **advance**: an agent moves to its next waypoint once the predicted distance to the current
-  one falls below ``reach_threshold`` (closed loop), and to its final goal after the last one;
+  one falls below its threshold (closed loop), and to its final goal after the last one. The
+  threshold is ``reach_threshold``, raised for a waypoint whose own distance to itself (a
+  learned distance is not zero there) plus ``self_margin`` is larger: an agent standing on
+  such a waypoint would otherwise never see it reached;
 - **plan time**: an agent does not leave waypoint ``k`` before the plan's departure time from
   it (so CBS's waits happen in the environment, too);
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
@@ -17,14 +20,19 @@ current waypoint's observation. Rules, all from observations only:
   where it stands (without one, it gives a waypoint up and heads for the next one). A
   deterministic policy that pushes into a wall would otherwise push there until the episode
   ends;
+- **fallback** (optional): an agent stuck ``skip_after`` times on the way to one target
+  hands that leg over to ``fallback_policy`` until it reaches its next waypoint (e.g. a
+  constrained policy that will not approach a goal beside furniture hands over to the
+  unconstrained one);
 - **replan** (optional): a callback asked for a new plan when an agent is stuck (above), or
   when it falls more than ``replan_lag`` steps behind its plan.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable, Deque, Dict, List, Optional, Sequence
+from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -62,6 +70,9 @@ class ControllerStats:
     replans: int = 0
     escapes: int = 0
     skips: int = 0
+    settled: int = 0
+    fallbacks: int = 0
+    fallback_steps: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
 
 
@@ -74,6 +85,17 @@ class WaypointController:
             advance test).
         plans: agent name -> :class:`AgentPlan`.
         reach_threshold: advance when the predicted distance to the waypoint is below this.
+        self_margin: also advance when the predicted distance is below the waypoint's predicted
+            distance to itself plus this (``None``: ``reach_threshold`` only). On the apartments
+            the shipped critics predict 1.2-3.5 steps from a panorama to itself.
+        settle_patience: also advance when the agent came within ``settle_slack`` predicted steps
+            of a waypoint's threshold and has not come closer (by a quarter step) for this many
+            steps: it is beside the waypoint, and a policy that does not close the last half
+            metre would otherwise hover there (``None``: off).
+        settle_slack: see ``settle_patience``.
+        fallback_policy: optional second ``policy(obs, goal) -> actions`` that drives an agent
+            from the moment it is stuck ``skip_after`` times on the way to one target until it
+            reaches the next waypoint (or, on its last leg, the goal).
         safety_radius: yield when another agent is closer than this under ``proximity``
             (``None`` disables yielding).
         proximity: ``proximity(obs_a[B, ...], obs_b[B, ...]) -> [B]`` distance between agents'
@@ -105,6 +127,10 @@ class WaypointController:
         distance: PairFn,
         plans: Dict[str, AgentPlan],
         reach_threshold: float = 2.0,
+        self_margin: Optional[float] = None,
+        settle_patience: Optional[int] = None,
+        settle_slack: float = 1.5,
+        fallback_policy: Optional[PolicyFn] = None,
         safety_radius: Optional[float] = 3.0,
         proximity: Optional[PairFn] = None,
         replan: Optional[Callable[[str, np.ndarray, AgentPlan], AgentPlan]] = None,
@@ -123,6 +149,13 @@ class WaypointController:
         self.distance = distance
         self.plans = dict(plans)
         self.reach_threshold = float(reach_threshold)
+        self.self_margin = None if self_margin is None else float(self_margin)
+        self.settle_patience = None if settle_patience is None else int(settle_patience)
+        self.settle_slack = float(settle_slack)
+        self.fallback_policy = fallback_policy
+        #: per agent: waypoints reached so far, and the count at which its fallback leg began
+        self._reached = {a: 0 for a in self.plans}
+        self._fallback_at: Dict[str, int] = {}
         self.safety_radius = safety_radius
         self.proximity = proximity
         self.replan = replan
@@ -137,6 +170,8 @@ class WaypointController:
         self._stuck_count = {a: 0 for a in self.plans}
         self.index = {a: 0 for a in self.plans}
         self._at_start = {a: p.starts_at_first and len(p.waypoints) > 0 for a, p in self.plans.items()}
+        self._thresholds = {a: self._reach_thresholds(p) for a, p in self.plans.items()}
+        self._progress: Dict[str, Tuple[int, float, int]] = {}
         self.t = 0
         self.stats = ControllerStats()
 
@@ -145,6 +180,35 @@ class WaypointController:
         plan = self.plans[agent]
         k = self.index[agent]
         return plan.waypoints[k] if k < len(plan.waypoints) else plan.goal
+
+    def _reach_thresholds(self, plan: AgentPlan) -> np.ndarray:
+        """Per waypoint of ``plan``: the predicted distance below which it counts as reached."""
+        k = len(plan.waypoints)
+        thr = np.full(k, self.reach_threshold)
+        if self.self_margin is not None and k:
+            wps = np.asarray(plan.waypoints)
+            own = np.asarray(self.distance(wps, wps), dtype=np.float64).reshape(k)
+            thr = np.maximum(thr, own + self.self_margin)
+        return thr
+
+    def reach_threshold_of(self, agent: str) -> float:
+        """The threshold below which ``agent``'s current waypoint counts as reached (``inf`` past the last)."""
+        k = self.index[agent]
+        thr = self._thresholds[agent]
+        return float(thr[k]) if k < len(thr) else math.inf
+
+    def _settled(self, agent: str, k: int, d: float) -> bool:
+        """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it has come
+        within ``settle_slack`` of the threshold and not come closer for ``settle_patience`` steps."""
+        if self.settle_patience is None or not math.isfinite(d):
+            return False
+        best = self._progress.get(agent)
+        if best is None or best[0] != k or d < best[1] - 0.25:
+            self._progress[agent] = best = (k, min(d, best[1]) if best is not None and best[0] == k else d, self.t)
+        if best[1] < self._thresholds[agent][k] + self.settle_slack and self.t - best[2] >= self.settle_patience:
+            self.stats.settled += 1
+            return True
+        return False
 
     def _lag(self, agent: str) -> int:
         plan = self.plans[agent]
@@ -168,16 +232,26 @@ class WaypointController:
             for i, a in enumerate(live):
                 plan = self.plans[a]
                 k = self.index[a]
-                if k < len(plan.waypoints) and d[i] < self.reach_threshold:
+                if k >= len(plan.waypoints):
+                    continue
+                if d[i] < self._thresholds[a][k] or self._settled(a, k, float(d[i])):
                     if plan.depart_times is not None and self.t < int(plan.depart_times[k]):
                         continue
                     self.index[a] = k + 1
                     self._stuck_count[a] = 0
+                    if not (k == 0 and self._at_start[a]):
+                        self._reached[a] += 1
                     moved = True
             if not moved:
                 break
         goals = np.stack([self.current_goal(a) for a in live])
         actions = np.asarray(self.policy(obs, goals), dtype=np.float32).reshape(len(live), -1)
+        if self.fallback_policy is not None:
+            fb = [i for i, a in enumerate(live) if self._fallback_at.get(a) == self._reached[a]]
+            if fb:
+                actions[fb] = np.asarray(self.fallback_policy(obs[fb], goals[fb]),
+                                         dtype=np.float32).reshape(len(fb), -1)
+                self.stats.fallback_steps += len(fb)
         hold = np.zeros(len(live), dtype=bool)
         # wait at a reached waypoint until the plan's departure time
         for i, a in enumerate(live):
@@ -185,7 +259,7 @@ class WaypointController:
             k = self.index[a]
             if plan.depart_times is not None and k < len(plan.waypoints) and self.t < int(plan.depart_times[k]):
                 at_start = k == 0 and self._at_start[a]
-                if at_start or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self.reach_threshold:
+                if at_start or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self._thresholds[a][k]:
                     hold[i] = True
                     self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
@@ -209,6 +283,8 @@ class WaypointController:
         self.plans[agent] = plan
         self.index[agent] = 0
         self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
+        self._thresholds[agent] = self._reach_thresholds(plan)
+        self._progress.pop(agent, None)
         self._stuck_count[agent] = 0
 
     def _replan(self, agent: str, obs: np.ndarray) -> None:
@@ -241,7 +317,11 @@ class WaypointController:
             self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
             k = self.index[a]
             if self._stuck_count[a] >= self.skip_after:
-                if self.replan is not None:  # the target seems out of reach from here: a new plan
+                if self.fallback_policy is not None and self._fallback_at.get(a) != self._reached[a]:
+                    self._fallback_at[a] = self._reached[a]  # hand this leg over first
+                    self._stuck_count[a] = 0
+                    self.stats.fallbacks += 1
+                elif self.replan is not None:  # the target seems out of reach from here: a new plan
                     self._replan(a, obs[i])
                 elif k < len(self.plans[a].waypoints):  # no planner: head for the next target
                     self.index[a] = k + 1

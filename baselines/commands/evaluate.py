@@ -42,6 +42,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run the methods without search only at these agent counts (the paper's Table II: 1; "
                         "default: every count)")
     p.add_argument("--budget", type=float, default=None, help="risk budget of ours_budget")
+    p.add_argument("--fallback", action="store_true",
+                   help="the constrained searches (ours, ours_budget) hand an agent's leg over to the unconstrained "
+                        "policy once the constrained one is stuck on it (e.g. it will not approach a goal beside "
+                        "furniture); the other methods are unchanged")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -163,6 +167,9 @@ def run(args: argparse.Namespace) -> int:
     methods = [m.with_options(**opts) if m.search and math.isfinite(m.c_max) and opts else m for m in methods]
     if args.budget is not None:
         methods = [m.with_options(budget=args.budget) if m.budget is not None else m for m in methods]
+    if args.fallback:
+        methods = [m.with_options(fallback="unconstrained") if m.search and m.policy == "constrained" else m
+                   for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
 
@@ -257,6 +264,8 @@ def _run_paper(args: argparse.Namespace) -> int:
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
                              "0.1 .. 1, chosen per cell on the test problems)")
+    if args.fallback:
+        raise ValueError("--fallback does not apply to --protocol paper (its agents follow their plans open loop)")
     methods = get_methods(names)
     t0 = time.perf_counter()
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}

@@ -270,3 +270,26 @@ def test_c_max_from_an_earlier_validation_is_checked_before_any_work(tmp_path, c
     assert main(["evaluate", "--c-max-from", str(f), "--c-max", "0.3", "--agents", "1", "--out", out]) == 2
     assert "not both" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_path, capsys, monkeypatch):
+    import baselines.evaluation as ev
+    from baselines.cli import main
+
+    seen = {}
+    real = ev.execute
+
+    def spy(env, method, models, *args, **kwargs):
+        seen[method.name] = method.fallback
+        return real(env, method, models, *args, **kwargs)
+
+    monkeypatch.setattr(ev, "execute", spy)
+    code = main(["evaluate", "--agents", "1", "--problems", "1", "--difficulty", "easy", "--methods", "sorb",
+                 "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--json", "--fallback",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    assert seen == {"sorb": None, "constrained_policy": None, "ours": "unconstrained"}
+    capsys.readouterr()
+    assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--fallback",
+                 "--out", str(tmp_path / "p")]) == 2
+    assert "--fallback does not apply" in capsys.readouterr().err

@@ -195,3 +195,96 @@ def test_a_stuck_agent_asks_for_a_new_plan_when_it_can():
     assert agent == "agent_0" and index == 0  # it was still heading for the unreachable waypoint
     assert obs[1] * SIZE < 1.0  # asked from where it was stuck, against the wall
     assert len(ctrl.plans["agent_0"].waypoints) == 0 and ctrl.index["agent_0"] == 0
+
+
+def test_a_waypoint_whose_own_distance_is_above_the_threshold_is_still_reached():
+    """A learned distance from a panorama to itself is not zero: with ``self_margin`` a waypoint
+    counts as reached below its own predicted distance plus the margin."""
+    wp = np.array([[12.0, 5.0]], np.float32) / SIZE
+    goal = np.array([12, 25], np.float32) / SIZE
+    for margin, arrives in ((0.5, True), (None, False)):
+        env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
+        ctrl = WaypointController(straight_policy, offset_steps, {"agent_0": AgentPlan(wp, goal)},
+                                  reach_threshold=2.0, self_margin=margin, safety_radius=None, stuck_window=None)
+        trail = run(env, ctrl, limit=60)["agent_0"]
+        assert (np.linalg.norm(trail[-1] - [12, 25]) <= 1.0) == arrives
+        assert ctrl.reach_threshold_of("agent_0") == (np.inf if arrives else 2.0)
+
+
+def short_stopper(obs, goal):
+    """A policy that stops 2 units short of its goal along x (it never closes the last bit)."""
+    target = goal - np.array([2.0, 0.0], np.float32) / SIZE
+    return np.clip((target - obs) * SIZE, -1.0, 1.0)
+
+
+def test_an_agent_hovering_beside_its_waypoint_moves_on_after_the_settle_patience():
+    wp = np.array([[20.0, 5.0]], np.float32) / SIZE
+    goal = np.array([12, 25], np.float32) / SIZE
+    results = {}
+    for patience in (5, None):
+        env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
+        ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                                  reach_threshold=1.0, settle_patience=patience, settle_slack=1.5,
+                                  safety_radius=None, stuck_window=None)
+        trail = run(env, ctrl, limit=80)["agent_0"]
+        results[patience] = (ctrl.index["agent_0"], ctrl.stats.settled, trail)
+    index, settled, trail = results[5]
+    assert index == 1 and settled == 1
+    assert trail[-1][1] > 20.0  # it went on towards the goal
+    index, settled, trail = results[None]
+    assert index == 0 and settled == 0 and trail[-1][1] < 6.0  # hovering 2 units short to the end
+    # too far from the waypoint to count as beside it: the rule does not fire
+    env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
+    ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                              reach_threshold=0.2, settle_patience=5, settle_slack=1.0,
+                              safety_radius=None, stuck_window=None)
+    run(env, ctrl, limit=40)
+    assert ctrl.index["agent_0"] == 0 and ctrl.stats.settled == 0
+
+
+def refuser(obs, goal):
+    """A policy that will not move (a constrained policy refusing a goal beside furniture)."""
+    return np.zeros((len(obs), 2), np.float32)
+
+
+def test_a_stuck_leg_is_handed_to_the_fallback_policy():
+    goal = np.array([20, 5], np.float32) / SIZE
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+                              reach_threshold=1.0, safety_radius=None, fallback_policy=straight_policy, seed=1)
+    trail = run(env, ctrl, limit=80)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0
+    assert ctrl.stats.fallbacks == 1 and ctrl.stats.fallback_steps > 0
+    # without it the refusing agent never gets there
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+                              reach_threshold=1.0, safety_radius=None, seed=1)
+    trail = run(env, ctrl, limit=80)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [20, 5]) > 5.0 and ctrl.stats.fallbacks == 0
+
+
+def test_the_fallback_drives_only_the_stuck_leg():
+    """After the fallback brings the agent to its next waypoint, its own policy drives again."""
+    calls = {"main": 0, "fallback": 0}
+
+    def main(obs, goal):
+        calls["main"] += 1
+        far = np.linalg.norm((goal - obs) * SIZE, axis=-1) > 3.0  # refuses until close
+        out = straight_policy(obs, goal)
+        out[far & (goal[:, 0] * SIZE < 15)] = 0.0  # ... on the first leg only
+        return out
+
+    def fb(obs, goal):
+        calls["fallback"] += 1
+        return straight_policy(obs, goal)
+
+    wp = np.array([[12.0, 5.0]], np.float32) / SIZE
+    goal = np.array([25, 5], np.float32) / SIZE
+    env = make_env([(5.0, 5.0)], [(25.0, 5.0)])
+    ctrl = WaypointController(main, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                              reach_threshold=1.0, safety_radius=None, fallback_policy=fb, seed=0)
+    trail = run(env, ctrl, limit=80)["agent_0"]
+    assert np.linalg.norm(trail[-1] - [25, 5]) <= 1.0
+    assert ctrl.stats.fallbacks == 1
+    # the fallback drove from the hand-over to the waypoint (7 units at up to 1 a step), no further
+    assert 5 <= ctrl.stats.fallback_steps <= 12

@@ -201,3 +201,36 @@ def test_the_reach_threshold_default_follows_the_observation_type(agent):
     assert default_reach_threshold(vec) == REACH_THRESHOLD == default_reach_threshold(agent)
     assert SearchPolicy(None, agent).reach_threshold == REACH_THRESHOLD
     assert SearchPolicy(None, agent, reach_threshold=1.5).reach_threshold == 1.5
+
+
+def test_controller_defaults_follow_the_observation_type(agent):
+    from types import SimpleNamespace
+
+    from gymnasium import spaces
+
+    from agents.search.policy import PANORAMA_CONTROLLER_OPTIONS, default_controller_options
+
+    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
+    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
+    assert default_controller_options(pano) == PANORAMA_CONTROLLER_OPTIONS
+    assert PANORAMA_CONTROLLER_OPTIONS["settle_patience"] > 0 and PANORAMA_CONTROLLER_OPTIONS["self_margin"] > 0
+    assert default_controller_options(agent) == {} and SearchPolicy(None, agent).controller_kwargs == {}
+    custom = SearchPolicy(None, agent, controller_kwargs={"settle_patience": 3})
+    assert custom.controller_kwargs == {"settle_patience": 3}
+
+
+def test_a_stuck_agent_whose_ban_cuts_every_route_retries_banning_only_the_failed_waypoint(agent, nodes):
+    """Banning every node near a failed waypoint can disconnect the graph (the only doorway);
+    the replan then bans the failed waypoints alone instead of giving the waypoint up."""
+    env = safe_mapf_envs.parallel_env(ENV_ID, n_agents=1)
+    policy = SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, seed=0, ban_radius=1e9)
+    obs, _ = env.reset(seed=0, options={"starts": [[10.0, 27.5]], "goals": [[45.0, 27.5]]})
+    policy.predict({a: obs[a] for a in env.agents})
+    route = list(policy.routes["agent_0"])
+    assert len(route) >= 3
+    policy.controller.index["agent_0"] = 1  # pretend it failed to reach its first waypoint
+    new = policy._replan_stuck("agent_0", obs["agent_0"]["observation"], policy.controller.plans["agent_0"])
+    assert policy._banned["agent_0"] == [route[1]]  # the neighbourhood ban (every node) was dropped
+    new_route = policy.routes["agent_0"]
+    # a new plan (giving the waypoint up would keep the old route's tail, without the start flag)
+    assert new.starts_at_first and route[1] not in new_route and len(new.waypoints) == len(new_route)
