@@ -88,7 +88,7 @@ class WaypointController:
         self_margin: also advance when the predicted distance is below the waypoint's predicted
             distance to itself plus this (``None``: ``reach_threshold`` only). On the apartments
             the shipped critics predict 1.2-3.5 steps from a panorama to itself.
-        settle_patience: also advance when the agent came within ``settle_slack`` predicted steps
+        settle_patience: also advance when the agent is within ``settle_slack`` predicted steps
             of a waypoint's threshold and has not come closer (by a quarter step) for this many
             steps: it is beside the waypoint, and a policy that does not close the last half
             metre would otherwise hover there (``None``: off).
@@ -198,14 +198,16 @@ class WaypointController:
         return float(thr[k]) if k < len(thr) else math.inf
 
     def _settled(self, agent: str, k: int, d: float) -> bool:
-        """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it has come
-        within ``settle_slack`` of the threshold and not come closer for ``settle_patience`` steps."""
+        """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it is within
+        ``settle_slack`` of the threshold and has not come closer for ``settle_patience`` steps (an
+        agent pressed against a wall with the waypoint behind it reads far, and is not settled)."""
         if self.settle_patience is None or not math.isfinite(d):
             return False
         best = self._progress.get(agent)
         if best is None or best[0] != k or d < best[1] - 0.25:
             self._progress[agent] = best = (k, min(d, best[1]) if best is not None and best[0] == k else d, self.t)
-        if best[1] < self._thresholds[agent][k] + self.settle_slack and self.t - best[2] >= self.settle_patience:
+        near = self._thresholds[agent][k] + self.settle_slack
+        if d < near and best[1] < near and self.t - best[2] >= self.settle_patience:
             self.stats.settled += 1
             return True
         return False

@@ -288,3 +288,16 @@ def test_the_fallback_drives_only_the_stuck_leg():
     assert ctrl.stats.fallbacks == 1
     # the fallback drove from the hand-over to the waypoint (7 units at up to 1 a step), no further
     assert 5 <= ctrl.stats.fallback_steps <= 12
+
+
+def test_settling_needs_the_agent_near_now_not_only_once():
+    """An agent that read near once and is now pressed against a wall with its waypoint behind it
+    (reading far) has not settled beside the waypoint."""
+    wp = np.array([[12.0, 5.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(wp, np.array([12, 25], np.float32) / SIZE)},
+                              reach_threshold=3.0, settle_patience=5, settle_slack=1.5)
+    assert not ctrl._settled("agent_0", 0, 3.5)  # closest approach so far, at t = 0
+    ctrl.t = 10
+    assert not ctrl._settled("agent_0", 0, 15.0)  # far now: not settled
+    assert ctrl._settled("agent_0", 0, 3.6) and ctrl.stats.settled == 1  # near now, no closer for 10 steps
