@@ -82,7 +82,7 @@ class CBSSearch(ConflictGraphHeuristics):
                  init_paths: Optional[List[AgentPath]] = None, symmetry: bool = True,
                  merge_threshold: Optional[int] = None, merge_node_limit: int = 100_000,
                  merge_max_agents: int = 4, merge_budget: float = 0.5, merge_space_limit: Optional[int] = None,
-                 disjoint_target: bool = False):
+                 disjoint_target: bool = False, pseudo_corridors: bool = False):
         self.ctx = ctx
         self.inst = ctx.inst
         self.agents = agents
@@ -96,6 +96,10 @@ class CBSSearch(ConflictGraphHeuristics):
         self.sub = sub
         self.init_paths = init_paths
         self.symmetry = symmetry
+        #: with ``symmetry``: split head-on conflicts outside corridors as pseudo-corridors
+        self.pseudo_corridors = pseudo_corridors and symmetry
+        #: what the last chosen split was: "plain", "corridor", "pseudo" or "rectangle"
+        self.last_split = "plain"
         self.lower_bound = 0
         self.expanded = 0
         #: merge two (meta-)agents once they have conflicted more than this many times (None: never)
@@ -145,7 +149,7 @@ class CBSSearch(ConflictGraphHeuristics):
         sub = CBSSearch(self.ctx, [self.agents[i], self.agents[j]], [node.cons[i], node.cons[j]], heuristic="cg",
                         prioritize=True, bypass=True, target_reasoning=self.tr, node_limit=node_limit, sub=True,
                         init_paths=[node.paths[i], node.paths[j]], symmetry=self.symmetry,
-                        disjoint_target=self.disjoint_target)
+                        disjoint_target=self.disjoint_target, pseudo_corridors=self.pseudo_corridors)
         status, best = sub.run()
         return status, best, sub.lower_bound
 
@@ -224,7 +228,8 @@ class CBSSearch(ConflictGraphHeuristics):
         return c.cls
 
     def _symmetric_split(self, node: CTNode, c: Conflict) -> Optional[SymmetricSplit]:
-        """A corridor or rectangle split for ``c``: ``(class, branches, forced)``, or ``None``."""
+        """A corridor, pseudo-corridor or rectangle split for ``c``: ``(class, branches, forced,
+        kind)``, or ``None``."""
         ctx = self.ctx
         if c.kind not in (VERTEX, EDGE):
             return None
@@ -248,6 +253,10 @@ class CBSSearch(ConflictGraphHeuristics):
                 return val
 
             br = corridors.split(c, c.a1, p1, c.a2, p2, earliest)
+            kind = "corridor"
+            if br is None and self.pseudo_corridors:
+                br = corridors.pseudo_split(c, c.a1, self._mdd(node, l1), c.a2, self._mdd(node, l2), earliest)
+                kind = "pseudo"
             if br is not None:
                 cards = []
                 for gid, cons in br:
@@ -257,12 +266,12 @@ class CBSSearch(ConflictGraphHeuristics):
                     m = self._mdd(node, i)
                     cards.append(not m.avoidable(rc.node, rc.start, True, rc.end))
                 cls = CARDINAL if all(cards) else (SEMI_CARDINAL if any(cards) else NON_CARDINAL)
-                return cls, br, tuple(cards)
+                return cls, br, tuple(cards), kind
         geom = ctx.geometry
         if geom is not None and c.kind == VERTEX:
             br = geom.split(c, c.a1, self._mdd(node, l1), c.a2, self._mdd(node, l2))
             if br is not None:
-                return CARDINAL, br, (True, True)
+                return CARDINAL, br, (True, True), "rectangle"
         return None
 
     def _choose(self, node: CTNode) -> Branches:
@@ -273,6 +282,7 @@ class CBSSearch(ConflictGraphHeuristics):
         """:meth:`_choose`, and per branch whether it is known to raise its agent's cost."""
         allc = [c for lst in node.conflicts.values() for c in lst]
         allc.sort(key=lambda c: (c.time, c.a1, c.a2))
+        self.last_split = "plain"
         if not self.prioritize:
             return self._branches(node, allc[0]), (False, False)
         for c in allc:
@@ -280,7 +290,7 @@ class CBSSearch(ConflictGraphHeuristics):
         tr = self.tr
         allc.sort(key=lambda c: (c.cls, 0 if (c.kind == TARGET and tr) else 1, c.time, c.a1, c.a2))
         best_key: Optional[Tuple[int, ...]] = None
-        best: Optional[Tuple[Union[Branches, Conflict], Tuple[bool, ...]]] = None
+        best: Optional[Tuple[Union[Branches, Conflict], Tuple[bool, ...], str]] = None
         symmetric = self.symmetry and self.inst.unit
         # f-aware choice: with the weighted conflict graph known, prefer the splits whose
         # children get larger lower bounds (see _child_bound), then cardinal ones, etc.
@@ -291,6 +301,7 @@ class CBSSearch(ConflictGraphHeuristics):
             key: Tuple[int, ...] = (cls, 0 if (c.kind == TARGET and self.tr) else 1, c.time)
             branches: Optional[Branches] = None
             forced: Tuple[bool, ...] = (c.card1, c.card2)
+            kind = "plain"
             if symmetric:
                 if not c.sym_done:
                     c.sym = self._symmetric_split(node, c)
@@ -300,6 +311,7 @@ class CBSSearch(ConflictGraphHeuristics):
                     key = (min(sym[0], cls), 0, c.time)
                     branches = sym[1]
                     forced = sym[2]
+                    kind = sym[3]
             if faware:
                 # (how many children get a larger bound, the smaller and the larger child bound)
                 brs = branches if branches is not None else self._branches(node, c)
@@ -309,13 +321,13 @@ class CBSSearch(ConflictGraphHeuristics):
                 key = (-raised, -min(fs), -max(fs)) + key
             if best_key is None or key < best_key:
                 best_key = key
-                best = (branches if branches is not None else c, forced)
+                best = (branches if branches is not None else c, forced, kind)
                 if not faware and key[:2] == (CARDINAL, 0):
                     break
             if not symmetric and not faware and best_key is not None:
                 break  # sorted by class and time already
         assert best is not None  # there is at least one conflict
-        split, forced = best
+        split, forced, self.last_split = best
         if isinstance(split, Conflict):
             return self._branches(node, split), forced
         return split, forced
@@ -453,6 +465,15 @@ class CBSSearch(ConflictGraphHeuristics):
                 return None
             if merged == "dead":
                 return []
+        if not self.sub:
+            stats = self.ctx.stats
+            kind = self.last_split
+            if kind == "corridor":
+                stats.corridor_splits += 1
+            elif kind == "pseudo":
+                stats.pseudo_corridor_splits += 1
+            elif kind == "rectangle":
+                stats.rectangle_splits += 1
         children = []
         for k, (gid, cons) in enumerate(branches):
             i = self.local[gid]

@@ -33,8 +33,9 @@ CARDINAL, SEMI_CARDINAL, NON_CARDINAL = 0, 1, 2
 
 #: The two ways to resolve a conflict: ``[(agent, constraints), (agent, constraints)]``.
 Branches = List[Tuple[int, Tuple[Constraint, ...]]]
-#: A corridor or rectangle split: ``(class, branches, per branch whether it raises its agent's cost)``.
-SymmetricSplit = Tuple[int, Branches, Tuple[bool, ...]]
+#: A corridor, pseudo-corridor or rectangle split: ``(class, branches, per branch whether it
+#: raises its agent's cost, kind)`` with kind ``"corridor"``, ``"pseudo"`` or ``"rectangle"``.
+SymmetricSplit = Tuple[int, Branches, Tuple[bool, ...], str]
 
 
 @dataclass(slots=True, eq=False)

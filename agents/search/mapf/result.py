@@ -25,6 +25,12 @@ class CBSStats:
     merges: int = 0
     #: meta-agents split up again in a child whose coupled search passed ``merge_node_limit``
     unmerges: int = 0
+    #: splits of the main search on corridor conflicts (chains of two-neighbour nodes)
+    corridor_splits: int = 0
+    #: splits of the main search on pseudo-corridor conflicts (head-on, forced, anywhere)
+    pseudo_corridor_splits: int = 0
+    #: splits of the main search on rectangle conflicts
+    rectangle_splits: int = 0
 
 
 @dataclass

@@ -125,6 +125,17 @@ class CBSSolver:
             ``t`` and no agent is at ``x`` from ``t`` on" (instead of "``a2`` alone is never at
             ``x`` from ``t`` on", which overlaps the first branch and needs one split per
             passing agent). Unit time, with ``target_reasoning``.
+        pseudo_corridors: with ``symmetry``, split a head-on conflict that is not in a corridor
+            of the graph like a corridor of one cell (or of one edge) when both agents' MDDs
+            force it: a vertex conflict at ``x`` at ``t`` where every cheapest path of one agent
+            goes ``A, x, B`` at ``t - 1, t, t + 1`` and every one of the other ``B, x, A``, or a
+            swap conflict both of whose moves are forced. The branches are "the first agent is
+            not at ``B`` until ``U1``" | "the second is not at ``A`` until ``U2``", the bounds
+            sized from lower bounds on the agents' arrivals so that every solution meets one of
+            them (the argument, and the cases left out, are in
+            :meth:`agents.search.mapf.symmetry.Corridors.pseudo_split`). Each split resolves
+            the whole family of "who waits where" branches of the meeting at once. Unit time;
+            off under ``vanilla``. The result's ``stats.pseudo_corridor_splits`` counts them.
     """
 
     def __init__(
@@ -154,6 +165,7 @@ class CBSSolver:
         merge_budget: float = 0.5,
         merge_space_limit: Optional[int] = DEFAULT_MERGE_SPACE_LIMIT,
         disjoint_target: bool = True,
+        pseudo_corridors: bool = True,
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -186,7 +198,7 @@ class CBSSolver:
             raise ValueError(f"merge_budget must be >= 0, got {merge_budget!r}")
         if vanilla:
             heuristic, prioritize, bypass, target_reasoning, symmetry = "none", False, False, False, False
-            merge_threshold, disjoint_target = None, False
+            merge_threshold, disjoint_target, pseudo_corridors = None, False, False
         self.heuristic = heuristic
         self.prioritize = prioritize
         self.bypass = bypass
@@ -206,6 +218,7 @@ class CBSSolver:
         self.merge_budget = float(merge_budget)
         self.merge_space_limit = None if merge_space_limit is None else int(merge_space_limit)
         self.disjoint_target = bool(disjoint_target)
+        self.pseudo_corridors = bool(pseudo_corridors) and self.symmetry
 
     # -------------------------------------------------------------- checks
     def _precheck(self) -> Optional[str]:
@@ -289,7 +302,7 @@ class CBSSolver:
                                symmetry=self.symmetry, merge_threshold=self.merge_threshold,
                                merge_node_limit=self.merge_node_limit, merge_max_agents=self.merge_max_agents,
                                merge_budget=self.merge_budget, merge_space_limit=self.merge_space_limit,
-                               disjoint_target=self.disjoint_target)
+                               disjoint_target=self.disjoint_target, pseudo_corridors=self.pseudo_corridors)
             run = search.run
         try:
             status, node = run()

@@ -83,6 +83,8 @@ class Corridors:
                 self.corridor_of[x] = cid
         self._from_start: Optional[np.ndarray] = None
         self._avoiding: Dict[Tuple[int, int], Tuple[int, int]] = {}
+        #: per node, the other nodes with an edge into it
+        self.pred: List[List[int]] = [sorted(s) for s in inn]
 
     def from_start(self, agent: int) -> np.ndarray:
         """Shortest distances (steps) from the agent's start to every node."""
@@ -196,6 +198,131 @@ class Corridors:
             u1 = min(d2_A + k, d1p_B - 1)
             u2 = min(d1_B + k, d2p_A - 1)
         if tau1 > u1 or tau2 > u2:
+            return None  # the split would not cut the current paths
+        return [(i1, (RangeConstraint(i1, B, 0, u1),)), (i2, (RangeConstraint(i2, A, 0, u2),))]
+
+    def pseudo_split(self, c: Conflict, i1: int, m1: MDD, i2: int, m2: MDD,
+                     earliest: Optional[Callable[[int, int, Optional[int]], int]] = None) -> Optional[Branches]:
+        """Pseudo-corridor constraints for a head-on vertex or swap conflict anywhere, or ``None``.
+
+        The conflict must be head-on and forced: a vertex conflict at ``(x, t)`` where every
+        cheapest path of agent 1 is at ``A``, ``x``, ``B`` at ``t - 1``, ``t``, ``t + 1`` (its
+        MDD ``m1`` has those single-node levels) and every cheapest path of agent 2 at ``B``,
+        ``x``, ``A`` (``m2``), with ``A``, ``x``, ``B`` distinct; or a swap conflict, agent 1
+        moving ``A -> B`` and agent 2 ``B -> A`` at ``t``, both forced by their MDDs. The cells
+        between ``A`` and ``B`` (``x``, or none) are treated as a corridor of ``k`` edges
+        (``k = 2``, or ``1``) even though ``x`` may have more than two neighbours. Branches, as
+        for a corridor: ``agent1 not at B during [0, U1]`` / ``agent2 not at A during [0, U2]``
+        with ``U1 = min(L2 + k, E1 - 1)``, ``U2 = min(L1 + k, E2 - 1)``.
+
+        The bounds come from per-node lower bounds ``d_i(v)`` on agent ``i``'s arrival at ``v``
+        (its distance from its start, or with ``earliest(agent, node, None)`` the earliest
+        arrival under its constraints, which bounds every prefix of a path meeting them).
+        Call a first arrival of agent 1 at ``B`` *through the pseudo-corridor* when it steps
+        ``A -> x``, stays at ``x``, then steps ``x -> B`` (swap case: steps ``A -> B``); such an
+        arrival is at or after ``L1 = max(d1(B), d1(A) + k)``. Any other first arrival at ``B``
+        enters ``B`` from a node ``y`` other than ``x`` (swap case: other than ``A``), or enters
+        it from ``x`` after entering ``x`` from some ``z`` other than ``A`` and ``B``, so it is at
+        or after ``E1 = min(min_y d1(y) + 1, min_z d1(z) + 2)``. (Agents that start at ``B`` or
+        ``x`` are not split: their first arrival needs no entry.) ``L2`` and ``E2`` are the same
+        for agent 2, ``A`` and ``B`` swapped.
+
+        Soundness (every conflict-free solution meets a branch): suppose agent 1 is at ``B`` at
+        some step up to ``U1`` and agent 2 at ``A`` at some step up to ``U2``. Their first arrivals
+        ``tau1 <= U1 < E1`` and ``tau2 <= U2 < E2`` are both through the pseudo-corridor.
+        Vertex case: agent 1 is at ``x`` during ``[e1, tau1 - 1]`` and agent 2 during
+        ``[e2, tau2 - 1]``; if the two overlap they collide at ``x``; if agent 1 leaves first
+        (``e2 >= tau1``), ``e2 = tau1`` is a swap on ``x - B`` and ``e2 = tau1 + 1`` a vertex
+        conflict at ``B`` (agent 2 is there at ``e2 - 1``), so ``tau2 >= e2 + 1 >= tau1 + 3 >=
+        L1 + k + 1 > U2``; symmetrically if agent 2 leaves first, ``tau1 > U1``. Swap case:
+        ``tau1 = tau2`` is the swap itself, ``tau2 = tau1 + 1`` a vertex conflict at ``B`` (agent 2
+        is there at ``tau2 - 1``), so one of them is at least two steps after the other and past
+        its bound. Every bound used is a lower bound on the arrivals of *every* path meeting
+        the agents' constraints, so no solution is lost.
+
+        Returns ``None`` when the conflict is not of that form or the branches would not cut
+        the agents' current paths (agent 1 at ``B`` and agent 2 at ``A`` at ``t + 1``).
+        """
+        t = c.time
+        if c.kind == VERTEX:
+            x = c.x1
+            if t < 1 or t + 1 > m1.cost or t + 1 > m2.cost:
+                return None
+            lv1, lv2 = m1.levels, m2.levels
+            if len(lv1[t]) != 1 or len(lv2[t]) != 1 or x not in lv1[t] or x not in lv2[t]:
+                return None
+            if len(lv1[t - 1]) != 1 or len(lv1[t + 1]) != 1:
+                return None
+            (A,), (B,) = lv1[t - 1], lv1[t + 1]
+            if lv2[t - 1] != {B} or lv2[t + 1] != {A}:
+                return None
+            if A == B or A == x or B == x:
+                return None
+            inner: Tuple[int, ...] = (x,)
+        elif c.kind == EDGE:
+            A, B = c.x1, c.x2
+            if t + 1 > m1.cost or t + 1 > m2.cost or A == B:
+                return None
+            if m1.levels[t] != {A} or m1.levels[t + 1] != {B} or m2.levels[t] != {B} or m2.levels[t + 1] != {A}:
+                return None
+            inner = ()
+        else:
+            return None
+        k = len(inner) + 1
+        starts = self.inst.starts
+        if starts[i1] in inner or starts[i1] == B or starts[i2] in inner or starts[i2] == A:
+            return None
+        pred = self.pred
+
+        def others(end: int, before: int) -> Tuple[List[int], List[int]]:
+            """The nodes a first arrival at ``end`` not through the pseudo-corridor from
+            ``before`` can come from: directly (``ys``), or through ``x`` (``zs``)."""
+            if inner:
+                ys = [y for y in pred[end] if y != x and y != end]
+                zs = [z for z in pred[x] if z not in (x, before, end)]
+            else:
+                ys = [y for y in pred[end] if y != before and y != end]
+                zs = []
+            return ys, zs
+
+        ys1, zs1 = others(B, A)
+        ys2, zs2 = others(A, B)
+
+        def through(lower: Callable[[int], int], near: int, far: int) -> int:
+            """Lower bound on a first arrival at ``far`` through the pseudo-corridor from ``near``."""
+            return max(lower(far), lower(near) + k)
+
+        def around(lower: Callable[[int], int], ys: List[int], zs: List[int]) -> int:
+            """Lower bound on any other first arrival at the far end."""
+            return min([lower(y) + 1 for y in ys] + [lower(z) + 2 for z in zs] + [UNREACHABLE])
+
+        def static(agent: int) -> Callable[[int], int]:
+            dist = self.from_start(agent)
+            return lambda v: int(dist[v])
+
+        def sharp(agent: int) -> Callable[[int], int]:
+            dist = self.from_start(agent)
+            assert earliest is not None
+            return lambda v: max(int(dist[v]), earliest(agent, v, None))
+
+        lo1, lo2 = static(i1), static(i2)
+        l1, e1 = through(lo1, A, B), around(lo1, ys1, zs1)
+        l2, e2 = through(lo2, B, A), around(lo2, ys2, zs2)
+        tau = t + 1  # both agents' current (first) arrivals at their far ends
+        if earliest is not None:
+            # sharpen the bounds that keep the split from cutting the current paths with the
+            # agents' constraints (each is still a lower bound on every arrival)
+            if tau > l2 + k:
+                l2 = through(sharp(i2), B, A)
+            if tau > e1 - 1:
+                e1 = around(sharp(i1), ys1, zs1)
+            if tau > l1 + k:
+                l1 = through(sharp(i1), A, B)
+            if tau > e2 - 1:
+                e2 = around(sharp(i2), ys2, zs2)
+        u1 = min(l2 + k, e1 - 1)
+        u2 = min(l1 + k, e2 - 1)
+        if tau > u1 or tau > u2:
             return None  # the split would not cut the current paths
         return [(i1, (RangeConstraint(i1, B, 0, u1),)), (i2, (RangeConstraint(i2, A, 0, u2),))]
 
