@@ -1,7 +1,8 @@
 """CBS on the MovingAI MAPF benchmark: solved count, median and worst solve time per map.
 
 Run: ``python examples/bench_cbs.py [--data-dir DIR] [--time-limit 60] [--maps NAME ...]
-[--scens SCEN ...] [--agents K] [--tiny] [--vanilla | --both | --ablation] [--merge-threshold B|none]
+[--scens SCEN ...] [--agents K] [--tiny] [--vanilla | --both | --ablation | --solvers NAME ...]
+[--merge-threshold B|none]
 [--no-disjoint-target] [--sweep [--step 5]] [--out results.csv|results.json] [--ray [ADDRESS]]``
 
 Instances are ``(map, scenario, K)``: the first ``K`` agents of a scenario. By default each
@@ -11,17 +12,20 @@ maze-32-32-2: 25, room-32-32-4: 30, empty-8-8: 24) on its six scenarios (random-
 stops at the first ``K`` that is not solved: larger ``K`` count as unsolved).
 
 The solvers: the default CBS of :mod:`agents.search.mapf` (prioritised conflicts, WDG heuristic,
-rectangle, corridor and target reasoning with the disjoint target split, meta-agent merging,
-bypass; grid coordinates passed) and, with ``--vanilla`` or ``--both``, the same CBS with those
+rectangle, corridor, pseudo-corridor and target reasoning with the disjoint target split,
+meta-agent merging, bypass; grid coordinates passed) and, with ``--vanilla`` or ``--both``, the same CBS with those
 improvements switched off (``vanilla=True``). ``--merge-threshold B`` (``none``: no merging)
 and ``--no-disjoint-target`` change the default CBS's options. ``--ablation`` runs every
 instance with the solvers of :data:`SOLVERS`: the vanilla CBS, the default one, the default one
 with each new technique off in turn (``no-merge``: ``merge_threshold=None``; ``no-disjoint``:
-``disjoint_target=False``), with merging on any map (``merge-any``: ``merge_space_limit=None``;
+``disjoint_target=False``; ``no-pseudo``: ``pseudo_corridors=False``, head-on conflicts outside
+corridors split plainly), with merging on any map (``merge-any``: ``merge_space_limit=None``;
 by default only meta-agents with few joint configurations are formed, i.e. on tiny maps) and
-with both techniques off (``no-new``: the solver before them), and prints
+with merging and the disjoint split off (``no-new``: the solver before them), and prints
 per solver the instances solved, the median and worst time and the high-level expansions
-(total over the instances, and the lower bound reached on each unsolved one). ``--tiny`` adds
+(total over the instances, and the lower bound reached on each unsolved one); ``--solvers NAME
+...`` does the same with only the named solvers of :data:`SOLVERS` (e.g. ``--solvers cbs
+no-pseudo``). ``--tiny`` adds
 the instances of ``tiny/`` under the data folder (every ``.map`` there with its ``.scen``, all
 its agents), e.g. ``pocket.map``; ``--agents K`` runs ``K`` agents instead of the map's
 largest count. Every solution is checked with :func:`agents.search.mapf.validate`
@@ -72,9 +76,11 @@ SOLVERS: Dict[str, Dict[str, Any]] = {
     "merge-any": {"merge_space_limit": None},
     "no-disjoint": {"disjoint_target": False},
     "no-new": {"merge_threshold": None, "disjoint_target": False},
+    "no-pseudo": {"pseudo_corridors": False},
 }
 FIELDS = ["solver", "map", "scen", "agents", "status", "solved", "soc", "lower_bound", "time_s",
-          "hl_expanded", "hl_generated", "ll_calls", "ll_expanded", "valid", "message"]
+          "hl_expanded", "hl_generated", "ll_calls", "ll_expanded", "corridor_splits", "pseudo_corridor_splits",
+          "valid", "message"]
 
 
 def instance_files(data: Path, name: str, scen: str) -> tuple:
@@ -110,7 +116,9 @@ def run_one(data: Path, name: str, scen: str, k: Optional[int], solver: str, tim
         "solver": solver, "map": name, "scen": scen, "agents": len(inst.starts), "status": res.status,
         "solved": solved, "soc": res.soc, "lower_bound": res.lower_bound, "time_s": round(elapsed, 3),
         "hl_expanded": res.stats.hl_expanded, "hl_generated": res.stats.hl_generated,
-        "ll_calls": res.stats.ll_calls, "ll_expanded": res.stats.ll_expanded, "valid": valid,
+        "ll_calls": res.stats.ll_calls, "ll_expanded": res.stats.ll_expanded,
+        "corridor_splits": res.stats.corridor_splits, "pseudo_corridor_splits": res.stats.pseudo_corridor_splits,
+        "valid": valid,
         "message": res.message,
     }
 
@@ -138,7 +146,8 @@ def print_rows(rows: List[dict]) -> None:
             continue
         lb = "" if row["solved"] else f" lb {row['lower_bound']}"
         print(f"  {row['solver']:11s} {row['map']:16s} {row['scen']:9s} K={row['agents']:2d}  {row['status']:10s} "
-              f"soc {row['soc']}{lb}  {row['time_s']:7.2f} s  hl {row['hl_expanded']}", flush=True)
+              f"soc {row['soc']}{lb}  {row['time_s']:7.2f} s  hl {row['hl_expanded']}  "
+              f"corridor/pseudo splits {row['corridor_splits']}/{row['pseudo_corridor_splits']}", flush=True)
 
 
 def summary(rows: List[dict], time_limit: float) -> str:
@@ -199,6 +208,8 @@ def main(argv: Optional[List[str]] = None) -> int:
                      help="run the improved and the vanilla CBS and compare their sums of costs")
     who.add_argument("--ablation", action="store_true",
                      help=f"run every instance with each solver of {', '.join(SOLVERS)} and print a table")
+    who.add_argument("--solvers", nargs="+", default=None, choices=list(SOLVERS), metavar="NAME",
+                     help="like --ablation with only these solvers (e.g. cbs no-pseudo)")
     ap.add_argument("--merge-threshold", default=None, metavar="B",
                     help="merge_threshold of the default CBS: an integer, or 'none' for no meta-agents")
     ap.add_argument("--no-disjoint-target", action="store_true",
@@ -215,6 +226,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         ap.error(f"{data} has no maps/ and scens/ folders: pass --data-dir")
     if args.ablation:
         solvers = list(SOLVERS)
+    elif args.solvers:
+        solvers = list(dict.fromkeys(args.solvers))
+        args.ablation = True  # the same table, for these solvers
     else:
         solvers = ["vanilla"] if args.vanilla else (["cbs", "vanilla"] if args.both else ["cbs"])
     options: Dict[str, Any] = {}
