@@ -40,6 +40,8 @@ Algorithm
     operator decomposition, :mod:`agents.search.mapf.coupled`), which solves tightly coupled
     tiny instances and proves infeasibility where no pair of agents alone can; by default only
     meta-agents with few joint configurations are formed (``merge_space_limit``).
+    Unit time, pairwise symmetry reasoning (``symmetry``): corridor, pseudo-corridor (head-on
+    conflicts the agents' MDDs force anywhere, ``pseudo_corridors``) and rectangle splits.
     ``suboptimality=w > 1`` switches to ECBS (focal search at both levels; the returned cost is
     at most ``w`` times the optimum). ``vanilla=True`` turns prioritisation, bypass, target and
     symmetry reasoning, merging and the heuristic off.
@@ -59,7 +61,7 @@ Modules, one concept each
     (timed paths and reservations), ``conflicts`` (conflict types and detection),
     ``lowlevel`` (space-time A*, focal search, earliest arrival), ``coupled`` (the joint
     search of a meta-agent), ``successors`` (what the low-level searches share),
-    ``constraints``, ``symmetry`` (corridor and rectangle reasoning), ``instance``, ``validate``
+    ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``
     and ``movingai`` (benchmark files).
 """
 from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict

@@ -1,15 +1,20 @@
-"""Pairwise symmetry reasoning for CBS (unit time): corridor and rectangle conflicts.
+"""Pairwise symmetry reasoning for CBS (unit time): corridor, pseudo-corridor and rectangle conflicts.
 
 Plain CBS resolves a conflict with one vertex constraint per branch. When two agents meet
 head-on in a corridor, or cross each other's paths in an open area of a grid, there are
 exponentially many equally good ways to resolve the meeting and plain CBS explores them one
-by one. The splits below resolve the whole symmetric family at once. Both are *sound*: every
+by one. The splits below resolve the whole symmetric family at once. All are *sound*: every
 conflict-free solution satisfies one of the two branches (proofs in the docstrings), so
 optimality is kept.
 
 - **Corridor** (any graph whose corridor edges go both ways): a chain ``A = x_0, x_1, ..., x_m,
   x_{m+1} = B`` whose inner nodes have exactly two neighbours. If agent 1 crosses it from ``A``
   to ``B`` and agent 2 from ``B`` to ``A``, one of them must let the other through first.
+- **Pseudo-corridor** (any graph): two agents meeting head-on at a node ``x`` (or swapping
+  along an edge) where both agents' MDDs force the meeting, ``x`` having any number of
+  neighbours: the same split as a corridor ``A - x - B`` of length one (or ``A - B``), its
+  bounds sized so that an agent at its far end early enough must have come through ``x``
+  from its near end (:meth:`Corridors.pseudo_split`).
 - **Rectangle** (4-connected grids, node coordinates given): two agents whose cheapest paths
   all move monotonically through a common rectangle, one crossing it top-to-bottom and the other
   left-to-right, always meet; barrier constraints along two borders force one to detour.
