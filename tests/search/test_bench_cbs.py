@@ -20,7 +20,8 @@ def load_bench():
 def test_bench_cbs_on_ray_gives_the_serial_answers(tmp_path, capsys):
     ray = pytest.importorskip("ray")
     bench = load_bench()
-    argv = ["--maps", "empty-8-8", "--scens", "random-1", "even-1", "--sweep", "--step", "12", "--time-limit", "20"]
+    # a generous time limit: on a busy CPU the Ray tasks share the cores with other work
+    argv = ["--maps", "empty-8-8", "--scens", "random-1", "even-1", "--sweep", "--step", "12", "--time-limit", "120"]
     assert bench.main([*argv, "--out", str(tmp_path / "serial.json")]) == 0
     try:
         assert bench.main([*argv, "--ray", "--out", str(tmp_path / "ray.json")]) == 0
