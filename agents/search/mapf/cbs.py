@@ -82,7 +82,9 @@ class CBSSearch(ConflictGraphHeuristics):
                  init_paths: Optional[List[AgentPath]] = None, symmetry: bool = True,
                  merge_threshold: Optional[int] = None, merge_node_limit: int = 100_000,
                  merge_max_agents: int = 4, merge_budget: float = 0.5, merge_space_limit: Optional[int] = None,
-                 disjoint_target: bool = False, pseudo_corridors: bool = False):
+                 disjoint_target: bool = False, pseudo_corridors: bool = False,
+                 group_bounds: bool = False, group_max_agents: int = 3, group_limit: int = 3,
+                 group_node_limit: int = 2_000, group_budget: float = 0.5):
         self.ctx = ctx
         self.inst = ctx.inst
         self.agents = agents
@@ -116,7 +118,13 @@ class CBSSearch(ConflictGraphHeuristics):
         #: set when a coupled search proved that some agents cannot all reach their goals at all
         self.proven_infeasible = False
         #: per pair of agents (global ids), how many of the splits so far were on their conflicts
-        self.conflict_counts: Dict[Tuple[int, int], int] = {}
+        self.conflict_counts = {}
+        #: group bounds in the WDG heuristic (unit time; see the heuristics)
+        self.group_bounds = group_bounds and unit and not sub
+        self.group_max_agents = group_max_agents
+        self.group_limit = group_limit
+        self.group_node_limit = group_node_limit
+        self.group_budget = group_budget
         #: meta-agents (global ids) whose coupled search ran past ``merge_node_limit``
         self.merge_failed: Set[frozenset] = set()
 
@@ -459,6 +467,7 @@ class CBSSearch(ConflictGraphHeuristics):
         which saves the low-level search of every child the search never reaches.
         """
         branches, forced = self._choose_forced(node)
+        self._count_split(branches)
         if self.merge_threshold is not None:
             merged = self._merge(node, branches)
             if merged == "merged":
@@ -661,9 +670,18 @@ class CBSSearch(ConflictGraphHeuristics):
         ctx.coupled[key] = tuple(planned)
         return planned
 
+    def _count_split(self, branches: Branches) -> None:
+        """Count a split of two agents' conflict (unit time) in :attr:`conflict_counts`."""
+        if len(branches) != 2 or not self.inst.unit:
+            return
+        a, b = self.agents[self.local[branches[0][0]]], self.agents[self.local[branches[1][0]]]
+        if a != b:
+            key = (a, b) if a < b else (b, a)
+            self.conflict_counts[key] = self.conflict_counts.get(key, 0) + 1
+
     def _merge(self, node: CTNode, branches: Branches) -> str:
-        """Count the conflict being split and merge its two (meta-)agents once they have
-        conflicted more than ``merge_threshold`` times in the search.
+        """Merge the two (meta-)agents of the conflict being split (counted already) once they
+        have conflicted more than ``merge_threshold`` times in the search.
 
         Returns ``"merged"`` (the node now plans them as one meta-agent under the same
         constraints: the same part of the solution space, so it replaces itself), ``"dead"`` (the
@@ -676,9 +694,7 @@ class CBSSearch(ConflictGraphHeuristics):
         a, b = self.agents[self.local[branches[0][0]]], self.agents[self.local[branches[1][0]]]
         if a == b:
             return "split"
-        counts = self.conflict_counts
-        key = (a, b) if a < b else (b, a)
-        counts[key] = counts.get(key, 0) + 1
+        counts = self.conflict_counts  # this split is counted already (_count_split)
         g1, g2 = self._members(node, self.local[a]), self._members(node, self.local[b])
         if g1 == g2:
             return "split"

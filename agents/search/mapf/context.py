@@ -10,7 +10,7 @@ import itertools
 import os
 import sys
 import time as _time
-from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Optional, Tuple
 
 from .constraints import CompiledConstraints, ConstraintSet, compile_constraints
 from .instance import MapfInstance
@@ -85,6 +85,14 @@ class SearchContext:
         #: (meta-agent's global ids, its members' constraint contents) -> its joint plan, ``None``
         #: (no plan) or the :class:`~agents.search.mapf.coupled.CoupledLimit` its search stopped at
         self.coupled: Dict[Tuple[Tuple[int, ...], Tuple[frozenset, ...]], Any] = {}
+        #: group bounds: (sorted global ids, their constraint contents) -> (a lower bound on the
+        #: group's optimal joint cost alone, its joint paths when that is the optimum, else None)
+        self.group_costs: Dict[Tuple[Tuple[int, ...], Tuple[frozenset, ...]],
+                               Tuple[int, Optional[Tuple[AgentPath, ...]]]] = {}
+        #: group bounds: per group (sorted global ids), [times evaluated, times it added a constraint]
+        self.group_use: Dict[Tuple[int, ...], List[int]] = {}
+        #: group bounds: expansions of their coupled searches so far
+        self.group_expanded = 0
         self.stats = CBSStats()
         self.ids = itertools.count()
         self._corridors: Optional[Corridors] = None

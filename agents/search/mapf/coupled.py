@@ -33,7 +33,17 @@ from .successors import CLOCK_CHECK_MASK, EMPTY_RESERVATION
 
 
 class CoupledLimit(Exception):
-    """The coupled search expanded ``max_states`` states without an answer."""
+    """The coupled search expanded ``max_states`` states without an answer.
+
+    ``bound``: a lower bound on the optimal sum of costs, the ``f`` of the last state expanded
+    (the heuristic, each member's distance to its goal raised to its goal constraints, is
+    consistent, so A* expands states in order of non-decreasing ``f`` and every one up to the
+    optimum); 0 when not known.
+    """
+
+    def __init__(self, bound: int = 0) -> None:
+        super().__init__(bound)
+        self.bound = bound
 
 
 #: a search node: (time of the moved members, j, positions, old positions of the first j,
@@ -112,7 +122,7 @@ def coupled_astar(
         pops += 1
         if pops > max_states:
             counter.expanded += pops
-            raise CoupledLimit
+            raise CoupledLimit(f)
         if not pops & clock and _time.perf_counter() > deadline:
             counter.expanded += pops
             raise SearchTimeout

@@ -42,8 +42,9 @@ class CTNode:
         #: its paths are planned when it is first popped (``g`` and ``f`` are lower bounds until
         #: then; ``paths`` and ``cons`` are empty)
         self.pending: Optional[Tuple[CTNode, Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]]] = None
-        #: the weighted conflict graph ``{(i, j): weight}`` the heuristic was computed from
-        self.hedges: Optional[Dict[Tuple[int, int], int]] = None
+        #: the weighted conflict graph ``{(i, j): weight}`` the heuristic was computed from (with
+        #: group bounds also group constraints ``{(i, j, k, ...): extra cost}``)
+        self.hedges: Optional[Dict[Tuple[int, ...], int]] = None
         #: the cover of ``hedges`` per component and the child bounds computed from it (see
         #: :meth:`agents.search.mapf.heuristics.ConflictGraphHeuristics._cover_memo`)
         self.hmemo: Optional[CoverMemo] = None

@@ -13,15 +13,17 @@ which the f-aware conflict choice of :mod:`agents.search.mapf.cbs` ranks splits 
 """
 from __future__ import annotations
 
-from typing import Dict, List, Optional, Sequence, Tuple
+from itertools import combinations
+from typing import Dict, List, Optional, Sequence, Set, Tuple
 
 from .conflicts import CARDINAL, Conflict
 from .constraints import Constraint, LengthConstraint
 from .context import SearchContext
+from .coupled import CoupledLimit, coupled_astar
 from .ctnode import CoverMemo, CTNode
 from .instance import MapfInstance
 from .mdd import MDD, mdds_dependent
-from .paths import satisfies
+from .paths import AgentPath, satisfies
 
 #: The weight (and heuristic) of an agent pair that cannot be solved under its constraints.
 INFEASIBLE = 1 << 50
@@ -29,19 +31,27 @@ INFEASIBLE = 1 << 50
 ANCESTORS = 8
 #: components of the conflict graph up to this many vertices are covered exactly
 _EXACT_COVER_MAX = 12
+#: group bounds: candidate groups looked at per node at most (scored, the best are evaluated)
+_GROUP_CANDIDATES_MAX = 2_000
+#: group bounds: coupled searches may always expand this many states in a solve
+GROUP_BASE_STATES = 50_000
 
-#: Weighted conflict graph: ``{(i, j): weight}``.
-Edges = Dict[Tuple[int, int], int]
+#: Weighted conflict graph: ``{(i, j): weight}``, plus group constraints ``{(i, j, k, ...): weight}``
+#: (keys of three or more agents: the group's extra cost, see :func:`min_vertex_cover`).
+Edges = Dict[Tuple[int, ...], int]
 
 # ---------------------------------------------------------------------------------- vertex cover
-_mvc_cache: Dict[Tuple[Tuple[int, int, int], ...], int] = {}
+_mvc_cache: Dict[Tuple[Tuple[Tuple[int, ...], int], ...], int] = {}
 
 
 def min_vertex_cover(edges: Edges) -> int:
     """Edge-weighted minimum vertex cover: min sum x_v with x_i + x_j >= w_ij, x >= 0 integers.
 
-    Exact per connected component up to 12 vertices (branch and bound, cached by component);
-    larger components use a matching lower bound (still admissible).
+    A key of three or more vertices is a group constraint ``sum_{v in key} x_v >= w`` (a
+    hyperedge); the value is then the minimum over the same integers meeting every pair and
+    every group constraint at once. Exact per connected component up to 12 vertices (branch and
+    bound, cached by component); larger components use a packing lower bound (the weights of
+    constraints with pairwise disjoint vertices, picked greedily; still admissible).
     """
     if not edges:
         return 0
@@ -49,13 +59,26 @@ def min_vertex_cover(edges: Edges) -> int:
 
 
 def mvc_components(edges: Edges) -> List[Tuple[List[int], Edges, int]]:
-    """Per connected component of the positive-weight edges: ``(vertices, edges, cover value)``."""
+    """Per connected component of the positive-weight edges: ``(vertices, edges, cover value)``.
+
+    A group constraint joins all its vertices into one component.
+    """
     adj: Dict[int, Dict[int, int]] = {}
-    for (i, j), w in edges.items():
+    hyper: List[Tuple[Tuple[int, ...], int]] = []
+    link: Dict[int, set] = {}
+    for e, w in edges.items():
         if w <= 0:
             continue
-        adj.setdefault(i, {})[j] = max(w, adj.get(i, {}).get(j, 0))
-        adj.setdefault(j, {})[i] = max(w, adj.get(j, {}).get(i, 0))
+        if len(e) == 2:
+            i, j = e
+            adj.setdefault(i, {})[j] = max(w, adj.get(i, {}).get(j, 0))
+            adj.setdefault(j, {})[i] = max(w, adj.get(j, {}).get(i, 0))
+        else:
+            members = tuple(sorted(e))
+            hyper.append((members, w))
+            for v in members:
+                adj.setdefault(v, {})
+                link.setdefault(v, set()).update(members)
     out = []
     seen = set()
     for root in sorted(adj):
@@ -67,20 +90,29 @@ def mvc_components(edges: Edges) -> List[Tuple[List[int], Edges, int]]:
         while stack:
             v = stack.pop()
             comp.append(v)
-            for u in adj[v]:
+            for u in list(adj[v]) + list(link.get(v, ())):
                 if u not in seen:
                     seen.add(u)
                     stack.append(u)
         comp.sort()
-        cedges = tuple(sorted((i, j, w) for i in comp for j, w in adj[i].items() if i < j))
-        cdict = {(i, j): w for i, j, w in cedges}
-        if len(cedges) == 1:
-            out.append((comp, cdict, cedges[0][2]))
+        inside = set(comp)
+        cpairs = tuple(sorted((i, j, w) for i in comp for j, w in adj[i].items() if i < j))
+        chyper = [(e, w) for e, w in hyper if e[0] in inside]
+        cdict: Edges = {(i, j): w for i, j, w in cpairs}
+        for e, w in chyper:
+            cdict[e] = max(w, cdict.get(e, 0))
+        if len(cdict) == 1:
+            out.append((comp, cdict, next(iter(cdict.values()))))
             continue
-        key = _canonical(comp, cedges)
+        key = _canonical(comp, cdict)
         val = _mvc_cache.get(key)
         if val is None:
-            val = _mvc_exact(comp, adj) if len(comp) <= _EXACT_COVER_MAX else _matching_bound(cedges)
+            if len(comp) > _EXACT_COVER_MAX:
+                val = _packing_bound(cdict)
+            elif not chyper:
+                val = _mvc_exact(comp, adj)
+            else:
+                val = _cover_exact(comp, adj, [(e, w) for e, w in cdict.items() if len(e) > 2])
             if len(_mvc_cache) > 100_000:
                 _mvc_cache.clear()
             _mvc_cache[key] = val
@@ -88,18 +120,18 @@ def mvc_components(edges: Edges) -> List[Tuple[List[int], Edges, int]]:
     return out
 
 
-def _canonical(comp: List[int], cedges: Tuple[Tuple[int, int, int], ...]) -> Tuple[Tuple[int, int, int], ...]:
+def _canonical(comp: List[int], cedges: Edges) -> Tuple[Tuple[Tuple[int, ...], int], ...]:
     index = {v: k for k, v in enumerate(comp)}
-    return tuple(sorted((index[i], index[j], w) for i, j, w in cedges))
+    return tuple(sorted((tuple(sorted(index[v] for v in e)), w) for e, w in cedges.items()))
 
 
-def _matching_bound(cedges: Tuple[Tuple[int, int, int], ...]) -> int:
-    used = set()
+def _packing_bound(cedges: Edges) -> int:
+    """Sum of the weights of greedily chosen constraints whose vertices are pairwise disjoint."""
+    used: set = set()
     total = 0
-    for i, j, w in sorted(cedges, key=lambda e: (-e[2], e[0], e[1])):
-        if i not in used and j not in used:
-            used.add(i)
-            used.add(j)
+    for e, w in sorted(cedges.items(), key=lambda item: (-item[1], item[0])):
+        if not used.intersection(e):
+            used.update(e)
             total += w
     return total
 
@@ -145,6 +177,69 @@ def _mvc_exact(comp: List[int], adj: Dict[int, Dict[int, int]]) -> int:
     return best[0]
 
 
+def _cover_exact(comp: List[int], adj: Dict[int, Dict[int, int]], hyper: List[Tuple[Tuple[int, ...], int]]) -> int:
+    """Exact :func:`min_vertex_cover` of one component with group constraints (branch and bound).
+
+    Vertices are assigned in order; a pair constraint is enforced at its later vertex, a group
+    constraint at its last member. Some optimum has every ``x_v`` at most the largest weight of
+    a constraint on ``v`` (lowering a larger ``x_v`` to it keeps every constraint met), which
+    bounds the values tried.
+    """
+    order = sorted(comp, key=lambda v: (-len(adj[v]), v))
+    pos = {v: k for k, v in enumerate(order)}
+    n = len(order)
+    nbrs = [[(pos[u], w) for u, w in adj[v].items()] for v in order]
+    groups = [(tuple(sorted(pos[v] for v in e)), w) for e, w in hyper]
+    maxw = [max([w for _, w in nbrs[k]] + [w for m, w in groups if k in m] + [0]) for k in range(n)]
+    closing: List[List[Tuple[Tuple[int, ...], int]]] = [[] for _ in range(n)]
+    for m, w in groups:
+        closing[m[-1]].append((m, w))
+    best = [sum(maxw)]
+    x = [0] * n
+
+    def lower(k: int) -> int:
+        need = [0] * n
+        s = 0
+        for v in range(k, n):
+            nv = 0
+            for u, w in nbrs[v]:
+                if u < k and w - x[u] > nv:
+                    nv = w - x[u]
+            need[v] = nv
+            s += nv
+        extra = 0
+        for m, w in groups:
+            if m[-1] < k:
+                continue
+            r = w - sum(x[u] for u in m if u < k)
+            part = sum(need[u] for u in m if u >= k)
+            if r - part > extra:
+                extra = r - part
+        return s + extra
+
+    def rec(k: int, cost: int) -> None:
+        if cost + lower(k) >= best[0]:
+            return
+        if k == n:
+            best[0] = cost
+            return
+        lo = 0
+        for u, w in nbrs[k]:
+            if u < k and w - x[u] > lo:
+                lo = w - x[u]
+        for m, w in closing[k]:
+            r = w - sum(x[u] for u in m if u != k)
+            if r > lo:
+                lo = r
+        for val in range(lo, max(lo, maxw[k]) + 1):
+            x[k] = val
+            rec(k + 1, cost + val)
+        x[k] = 0
+
+    rec(0, 0)
+    return best[0]
+
+
 # ---------------------------------------------------------------------------------- heuristics
 class ConflictGraphHeuristics:
     """The heuristic part of the optimal CBS search (:class:`agents.search.mapf.cbs.CBSSearch`
@@ -158,6 +253,14 @@ class ConflictGraphHeuristics:
     inst: MapfInstance
     agents: List[int]
     heuristic: str
+    #: group bounds on (see :meth:`_group_constraints`); their knobs below
+    group_bounds: bool = False
+    group_max_agents: int = 3
+    group_limit: int = 3
+    group_node_limit: int = 2_000
+    group_budget: float = 0.5
+    #: per pair of agents (global ids), how many of the search's splits were on their conflicts
+    conflict_counts: Dict[Tuple[int, int], int]
 
     def _classify(self, node: CTNode, c: Conflict) -> int:
         """The conflict's class (cardinal, semi-cardinal, non-cardinal); provided by the search."""
@@ -289,9 +392,159 @@ class ConflictGraphHeuristics:
                 return INFEASIBLE
             if w > 0:
                 edges[(i, j)] = w
+        if self.group_bounds and unit and self.heuristic == "wdg":
+            extra = self._group_constraints(node, edges)
+            if extra is None:
+                return INFEASIBLE
+            if extra:
+                before = min_vertex_cover(edges)
+                edges.update(extra)
+                node.hedges = edges
+                node.hmemo = None
+                total = self._cover_memo(node)["total"]
+                if total > before:
+                    self.ctx.stats.group_raised += 1
+                return total
         node.hedges = edges
         node.hmemo = None
         return self._cover_memo(node)["total"]
+
+    # ------------------------------------------------------------------ group bounds
+    def _group_constraints(self, node: CTNode, edges: Edges) -> Optional[Edges]:
+        """Group constraints for the node's weighted conflict graph (``group_bounds``, unit time).
+
+        Candidates are groups of 3 (up to ``group_max_agents``) single agents connected in the
+        node's conflict graph; the ``group_limit`` ones whose pairs the search has split on most
+        often are evaluated: a group ``G`` gets the constraint ``sum_{v in G} x_v >= D_G``,
+        ``D_G`` being the optimal joint cost of ``G`` alone under the node's constraints (or a
+        lower bound on it) minus its members' individual costs (:meth:`_group_extra`), when
+        ``D_G`` exceeds the cover of the pair edges inside ``G`` (else it adds nothing).
+
+        Admissibility: let ``x_v`` be what agent ``v`` pays above its individual optimum in a
+        solution below this node. Every pair edge is met (``w_ij`` is the pair's extra cost
+        alone), and every group constraint too (``G`` alone, under the same constraints, is a
+        relaxation of the whole problem: ``sum_{v in G} (c_v + x_v) >= J_G``). So the minimum
+        of ``sum x_v`` over all the constraints together (:func:`min_vertex_cover`, exact or a
+        lower bound) is at most the solution's extra cost: no weight is counted twice, because
+        one ``x_v`` serves every constraint it appears in. In a child whose agent ``i`` rises by
+        ``d`` the constraint holds with ``D_G - d`` (:meth:`_child_bound`).
+
+        A group evaluated many times without ever adding a constraint is not tried again.
+        Returns ``{group: D_G}`` (empty: none), or ``None`` when a group has no joint plan under
+        the node's constraints (the node has no solution).
+        """
+        ctx = self.ctx
+        groups = node.groups
+        nb: Dict[int, Set[int]] = {}
+        for (i, j) in node.conflicts:
+            if groups is not None and (len(groups[i]) > 1 or len(groups[j]) > 1):
+                continue
+            nb.setdefault(i, set()).add(j)
+            nb.setdefault(j, set()).add(i)
+        cands: Set[Tuple[int, ...]] = set()
+        for j in sorted(nb):
+            for a, b in combinations(sorted(nb[j]), 2):
+                cands.add(tuple(sorted((a, j, b))))
+                if len(cands) >= _GROUP_CANDIDATES_MAX:
+                    break
+        size = 3
+        while size < self.group_max_agents and len(cands) < _GROUP_CANDIDATES_MAX:
+            size += 1
+            for g in sorted(c for c in cands if len(c) == size - 1):
+                for v in sorted(set().union(*(nb[u] for u in g)) - set(g)):
+                    cands.add(tuple(sorted(g + (v,))))
+        if not cands:
+            return {}
+        counts = self.conflict_counts
+        agents = self.agents
+        scored = []
+        for g in cands:
+            gids = tuple(sorted(agents[i] for i in g))
+            use = ctx.group_use.get(gids)
+            if use is not None and use[0] >= 4 * (use[1] + 2):
+                continue
+            splits = sum(counts.get((a, b), 0) for a, b in combinations(gids, 2))
+            inner = sum(1 for a, b in combinations(g, 2) if (a, b) in node.conflicts)
+            scored.append((-splits, -inner, gids, g))
+        scored.sort()
+        out: Edges = {}
+        for _, _, gids, g in scored[:self.group_limit]:
+            delta = self._group_extra(node, g)
+            if delta >= INFEASIBLE:
+                return None
+            use = ctx.group_use.setdefault(gids, [0, 0])
+            use[0] += 1
+            inside = {e: w for e, w in edges.items() if all(v in g for v in e)}
+            if delta > 0 and delta > min_vertex_cover(inside):
+                use[1] += 1
+                ctx.stats.group_constraints += 1
+                out[g] = delta
+        return out
+
+    def _group_extra(self, node: CTNode, g: Tuple[int, ...]) -> int:
+        """``D_G``: a lower bound on the optimal joint cost of the local agents ``g`` alone under
+        the node's constraints minus their individual costs (``INFEASIBLE``: no joint plan).
+
+        The joint cost is memoised by the members' constraint contents; under more constraints
+        it cannot drop, and (as for pairs) an ancestor's optimal joint plan that meets the
+        constraints added since is still optimal. Otherwise the coupled search of
+        :mod:`agents.search.mapf.coupled` runs with at most ``group_node_limit`` expansions (at
+        the limit its ``f`` bound is used), while the group searches of the solve have expanded
+        at most :data:`GROUP_BASE_STATES` plus ``group_budget`` times the other low-level
+        expansions; past that only known values and ancestors' bounds are used.
+        """
+        ctx = self.ctx
+        gids = tuple(self.agents[i] for i in g)
+        contents = tuple(node.cons[i].content for i in g)
+        key = (gids, contents)
+        known = ctx.group_costs.get(key)
+        if known is None:
+            floor = 0
+            for m, i in enumerate(g):
+                cur = node.cons[i]
+                walked: List[Constraint] = []
+                for _ in range(ANCESTORS):
+                    if cur.parent is None or cur.constraint is None:
+                        break
+                    walked.append(cur.constraint)
+                    cur = cur.parent
+                    old = ctx.group_costs.get((gids, contents[:m] + (cur.content,) + contents[m + 1:]))
+                    if old is None:
+                        continue
+                    floor = max(floor, old[0])  # more constraints: the optimum cannot drop
+                    if old[1] is not None and all(satisfies(old[1][m], c) for c in walked):
+                        known = old
+                        ctx.stats.group_reuses += 1
+                        break
+                if known is not None:
+                    break
+            if known is None:
+                others = ctx.counter.expanded - ctx.group_expanded
+                if ctx.group_expanded > GROUP_BASE_STATES + self.group_budget * others:
+                    return max(0, floor - sum(node.paths[i].cost for i in g)) if floor < INFEASIBLE else INFEASIBLE
+                ccs = [ctx.compile(gid, node.cons[i]) for gid, i in zip(gids, g)]
+                ctx.stats.group_searches += 1
+                before = ctx.counter.expanded
+                try:
+                    out = coupled_astar(self.inst, gids, ccs, None, ctx.deadline, ctx.counter,
+                                        self.group_node_limit)
+                except CoupledLimit as e:
+                    known = (max(e.bound, floor), None)
+                else:
+                    if out is None:
+                        known = (INFEASIBLE, None)
+                    else:
+                        paths = tuple(AgentPath(ev, self.inst) for ev in out)
+                        known = (sum(p.cost for p in paths), paths)
+                finally:
+                    ctx.group_expanded += ctx.counter.expanded - before
+            if len(ctx.group_costs) > 100_000:
+                ctx.group_costs.clear()
+            ctx.group_costs[key] = known
+        total = known[0]
+        if total >= INFEASIBLE:
+            return INFEASIBLE
+        return max(0, total - sum(node.paths[i].cost for i in g))
 
     @staticmethod
     def _cover_memo(node: CTNode) -> CoverMemo:

@@ -31,6 +31,15 @@ class CBSStats:
     pseudo_corridor_splits: int = 0
     #: splits of the main search on rectangle conflicts
     rectangle_splits: int = 0
+    #: group bounds (``group_bounds``): coupled searches run for a group's joint cost
+    group_searches: int = 0
+    #: group bounds: a group's joint cost known from an ancestor's joint plan, no search
+    group_reuses: int = 0
+    #: group bounds: group constraints added to a node's weighted conflict graph (a group's extra
+    #: cost above the pair bounds inside it)
+    group_constraints: int = 0
+    #: group bounds: nodes whose heuristic the group constraints raised above the pair cover
+    group_raised: int = 0
 
 
 @dataclass

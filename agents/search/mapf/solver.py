@@ -136,6 +136,28 @@ class CBSSolver:
             :meth:`agents.search.mapf.symmetry.Corridors.pseudo_split`). Each split resolves
             the whole family of "who waits where" branches of the meeting at once. Unit time;
             off under ``vanilla``. The result's ``stats.pseudo_corridor_splits`` counts them.
+        group_bounds: with the WDG heuristic, unit time: bounds beyond pairs. The pair edges of
+            the weighted conflict graph cannot see cost that only three or more agents together
+            must pay; for a few groups of agents connected in a node's conflict graph (those
+            whose pairs the search has split on most often) the optimal joint cost of the group
+            alone under the node's constraints is found by the coupled search (memoised by the
+            members' constraints, reused from an ancestor's joint plan that still meets them),
+            and its excess ``D_G`` over the members' own costs becomes a group constraint
+            ``sum_{v in G} x_v >= D_G`` beside the pair constraints ``x_i + x_j >= w_ij``; the
+            heuristic is the least ``sum x_v`` meeting all of them (admissible: the extra cost of
+            any solution below the node meets every one of them; see
+            :meth:`agents.search.mapf.heuristics.ConflictGraphHeuristics._group_constraints`).
+            Off under ``vanilla``. ``stats.group_searches``, ``group_reuses``,
+            ``group_constraints`` and ``group_raised`` count the coupled searches, the joint
+            costs taken from ancestors, the constraints added and the nodes they raised.
+        group_max_agents: group size, 3 or more (the candidates of size ``k + 1`` extend those
+            of size ``k`` by a conflicting neighbour).
+        group_limit: groups evaluated per node at most.
+        group_node_limit: expansions of each coupled search of a group (past it the search's
+            lower bound is used, which keeps the bound admissible).
+        group_budget: the group searches of a solve may expand 50,000 states plus this many
+            times the states of the other low-level searches; past that only known joint costs
+            (and ancestors' bounds) are used.
     """
 
     def __init__(
@@ -166,6 +188,11 @@ class CBSSolver:
         merge_space_limit: Optional[int] = DEFAULT_MERGE_SPACE_LIMIT,
         disjoint_target: bool = True,
         pseudo_corridors: bool = True,
+        group_bounds: bool = False,
+        group_max_agents: int = 3,
+        group_limit: int = 3,
+        group_node_limit: int = 2_000,
+        group_budget: float = 0.5,
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -196,9 +223,13 @@ class CBSSolver:
             raise ValueError(f"merge_space_limit must be >= 1 (or None for no limit), got {merge_space_limit!r}")
         if not (merge_budget >= 0):
             raise ValueError(f"merge_budget must be >= 0, got {merge_budget!r}")
+        if group_max_agents < 3:
+            raise ValueError(f"group_max_agents must be >= 3, got {group_max_agents!r}")
+        if group_limit < 0 or group_node_limit < 1 or not (group_budget >= 0):
+            raise ValueError("group_limit must be >= 0, group_node_limit >= 1 and group_budget >= 0")
         if vanilla:
             heuristic, prioritize, bypass, target_reasoning, symmetry = "none", False, False, False, False
-            merge_threshold, disjoint_target, pseudo_corridors = None, False, False
+            merge_threshold, disjoint_target, pseudo_corridors, group_bounds = None, False, False, False
         self.heuristic = heuristic
         self.prioritize = prioritize
         self.bypass = bypass
@@ -219,6 +250,11 @@ class CBSSolver:
         self.merge_space_limit = None if merge_space_limit is None else int(merge_space_limit)
         self.disjoint_target = bool(disjoint_target)
         self.pseudo_corridors = bool(pseudo_corridors) and self.symmetry
+        self.group_bounds = bool(group_bounds) and heuristic == "wdg"
+        self.group_max_agents = int(group_max_agents)
+        self.group_limit = int(group_limit)
+        self.group_node_limit = int(group_node_limit)
+        self.group_budget = float(group_budget)
 
     # -------------------------------------------------------------- checks
     def _precheck(self) -> Optional[str]:
@@ -302,7 +338,10 @@ class CBSSolver:
                                symmetry=self.symmetry, merge_threshold=self.merge_threshold,
                                merge_node_limit=self.merge_node_limit, merge_max_agents=self.merge_max_agents,
                                merge_budget=self.merge_budget, merge_space_limit=self.merge_space_limit,
-                               disjoint_target=self.disjoint_target, pseudo_corridors=self.pseudo_corridors)
+                               disjoint_target=self.disjoint_target, pseudo_corridors=self.pseudo_corridors,
+                               group_bounds=self.group_bounds, group_max_agents=self.group_max_agents,
+                               group_limit=self.group_limit, group_node_limit=self.group_node_limit,
+                               group_budget=self.group_budget)
             run = search.run
         try:
             status, node = run()
