@@ -19,7 +19,8 @@ and ``--no-disjoint-target`` change the default CBS's options. ``--ablation`` ru
 instance with the solvers of :data:`SOLVERS`: the vanilla CBS, the default one, the default one
 with each new technique off in turn (``no-merge``: ``merge_threshold=None``; ``no-disjoint``:
 ``disjoint_target=False``; ``no-pseudo``: ``pseudo_corridors=False``, head-on conflicts outside
-corridors split plainly), with merging on any map (``merge-any``: ``merge_space_limit=None``;
+corridors split plainly; ``group``: ``group_bounds=True``, the WDG heuristic with group
+constraints beyond pairs, off by default), with merging on any map (``merge-any``: ``merge_space_limit=None``;
 by default only meta-agents with few joint configurations are formed, i.e. on tiny maps) and
 with merging and the disjoint split off (``no-new``: the solver before them), and prints
 per solver the instances solved, the median and worst time and the high-level expansions
@@ -77,10 +78,11 @@ SOLVERS: Dict[str, Dict[str, Any]] = {
     "no-disjoint": {"disjoint_target": False},
     "no-new": {"merge_threshold": None, "disjoint_target": False},
     "no-pseudo": {"pseudo_corridors": False},
+    "group": {"group_bounds": True},
 }
 FIELDS = ["solver", "map", "scen", "agents", "status", "solved", "soc", "lower_bound", "time_s",
           "hl_expanded", "hl_generated", "ll_calls", "ll_expanded", "corridor_splits", "pseudo_corridor_splits",
-          "valid", "message"]
+          "group_searches", "group_raised", "valid", "message"]
 
 
 def instance_files(data: Path, name: str, scen: str) -> tuple:
@@ -118,6 +120,7 @@ def run_one(data: Path, name: str, scen: str, k: Optional[int], solver: str, tim
         "hl_expanded": res.stats.hl_expanded, "hl_generated": res.stats.hl_generated,
         "ll_calls": res.stats.ll_calls, "ll_expanded": res.stats.ll_expanded,
         "corridor_splits": res.stats.corridor_splits, "pseudo_corridor_splits": res.stats.pseudo_corridor_splits,
+        "group_searches": res.stats.group_searches, "group_raised": res.stats.group_raised,
         "valid": valid,
         "message": res.message,
     }
@@ -147,7 +150,8 @@ def print_rows(rows: List[dict]) -> None:
         lb = "" if row["solved"] else f" lb {row['lower_bound']}"
         print(f"  {row['solver']:11s} {row['map']:16s} {row['scen']:9s} K={row['agents']:2d}  {row['status']:10s} "
               f"soc {row['soc']}{lb}  {row['time_s']:7.2f} s  hl {row['hl_expanded']}  "
-              f"corridor/pseudo splits {row['corridor_splits']}/{row['pseudo_corridor_splits']}", flush=True)
+              f"corridor/pseudo splits {row['corridor_splits']}/{row['pseudo_corridor_splits']}  "
+              f"group searches/raised {row['group_searches']}/{row['group_raised']}", flush=True)
 
 
 def summary(rows: List[dict], time_limit: float) -> str:

@@ -83,8 +83,8 @@ class CBSSearch(ConflictGraphHeuristics):
                  merge_threshold: Optional[int] = None, merge_node_limit: int = 100_000,
                  merge_max_agents: int = 4, merge_budget: float = 0.5, merge_space_limit: Optional[int] = None,
                  disjoint_target: bool = False, pseudo_corridors: bool = False,
-                 group_bounds: bool = False, group_max_agents: int = 3, group_limit: int = 3,
-                 group_node_limit: int = 2_000, group_budget: float = 0.5):
+                 group_bounds: bool = False, group_max_agents: int = 3, group_limit: int = 4,
+                 group_node_limit: int = 5_000, group_budget: float = 1.0):
         self.ctx = ctx
         self.inst = ctx.inst
         self.agents = agents

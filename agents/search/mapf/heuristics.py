@@ -256,9 +256,9 @@ class ConflictGraphHeuristics:
     #: group bounds on (see :meth:`_group_constraints`); their knobs below
     group_bounds: bool = False
     group_max_agents: int = 3
-    group_limit: int = 3
-    group_node_limit: int = 2_000
-    group_budget: float = 0.5
+    group_limit: int = 4
+    group_node_limit: int = 5_000
+    group_budget: float = 1.0
     #: per pair of agents (global ids), how many of the search's splits were on their conflicts
     conflict_counts: Dict[Tuple[int, int], int]
 

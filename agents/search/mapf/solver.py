@@ -190,9 +190,9 @@ class CBSSolver:
         pseudo_corridors: bool = True,
         group_bounds: bool = False,
         group_max_agents: int = 3,
-        group_limit: int = 3,
-        group_node_limit: int = 2_000,
-        group_budget: float = 0.5,
+        group_limit: int = 4,
+        group_node_limit: int = 5_000,
+        group_budget: float = 1.0,
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
