@@ -3,9 +3,12 @@
     for a in 0 1 2 3; do
         safe-mapf evaluate --env SafeApartment$a-v0 --agents 1 5 10 --problems 20 \
             --methods unconstrained_policy sorb constrained_policy ours --policies-at 1 \
-            --c-max auto --validation-problems 5 --no-figure --out examples/table2/apt$a
+            --c-max-from examples/table2/apt$a/c_max.json --fallback --no-figure --out examples/table2/apt$a
     done
     python examples/visual_table.py examples/table2/apt0 examples/table2/apt1 examples/table2/apt2 examples/table2/apt3
+
+(each folder's ``c_max.json`` is the choice of an earlier ``--c-max auto --validation-problems 5``
+run, made on validation problems drawn with seed 10000).
 
 Reads each folder's ``runs.csv`` (or ``table.json``; written by ``safe-mapf evaluate``) and prints, per
 apartment, difficulty and agent count, SoRB + CBS and ours (largest cumulative cost over
