@@ -103,32 +103,9 @@ def edges_from_graph(graph: GraphLike) -> Tuple[int, Dict[Tuple[int, int], float
         if old is None or d < old:
             edges[(u, v)] = d
 
-    if sparse.issparse(graph):
-        m = sparse.coo_matrix(graph)
-        if m.shape[0] != m.shape[1]:
-            raise ValueError(f"graph matrix must be square, got shape {m.shape}")
-        n = m.shape[0]
-        data = np.asarray(m.data, dtype=np.float64)
-        if np.isnan(data).any():
-            raise ValueError("graph matrix contains NaN durations")
-        if (data < 0).any():
-            raise ValueError(f"graph matrix contains a negative duration ({data.min():g})")
-        keep = (data != 0) & np.isfinite(data)
-        for u, v, d in zip(m.row[keep].tolist(), m.col[keep].tolist(), data[keep].tolist()):
-            put(u, v, d)
-        return n, edges
-    if isinstance(graph, np.ndarray):
-        if graph.ndim != 2 or graph.shape[0] != graph.shape[1]:
-            raise ValueError(f"graph matrix must be square 2-D, got shape {graph.shape}")
-        d = graph.astype(np.float64)
-        if np.isnan(d).any():
-            raise ValueError("graph matrix contains NaN durations")
-        if (d < 0).any():
-            raise ValueError(f"graph matrix contains a negative duration ({d.min():g})")
-        r, c = np.nonzero(np.isfinite(d) & (d > 0))
-        for u, v, w in zip(r.tolist(), c.tolist(), d[r, c].tolist()):
-            put(u, v, w)
-        return d.shape[0], edges
+    if sparse.issparse(graph) or isinstance(graph, np.ndarray):
+        n_mat, r_arr, c_arr, d_arr = edge_arrays(graph)
+        return n_mat, dict(zip(zip(r_arr.tolist(), c_arr.tolist()), d_arr.tolist()))
     if isinstance(graph, Mapping):
         keys = list(graph.keys())
         if not all(isinstance(k, (int, np.integer)) and k >= 0 for k in keys):
