@@ -204,8 +204,8 @@ class WaypointController:
         if self.settle_patience is None or not math.isfinite(d):
             return False
         best = self._progress.get(agent)
-        if best is None or best[0] != k or d < best[1] - 0.25:
-            self._progress[agent] = best = (k, min(d, best[1]) if best is not None and best[0] == k else d, self.t)
+        if best is None or best[0] != k or d < best[1] - 0.25:  # a new target, or closer by a quarter step
+            self._progress[agent] = best = (k, d, self.t)
         near = self._thresholds[agent][k] + self.settle_slack
         if d < near and best[1] < near and self.t - best[2] >= self.settle_patience:
             self.stats.settled += 1

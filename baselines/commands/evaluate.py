@@ -207,6 +207,9 @@ def run(args: argparse.Namespace) -> int:
     if chosen is not None:
         header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
+    if args.fallback:
+        header += ("--fallback: the constrained searches hand a leg on which the constrained policy is stuck "
+                   "to the unconstrained policy\n\n")
     (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
     # the figure's rows: the smallest evaluated agent count and the largest one up to 10

@@ -289,6 +289,7 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
                  "--out", str(tmp_path)])
     assert code == 0
     assert seen == {"sorb": None, "constrained_policy": None, "ours": "unconstrained"}
+    assert "--fallback: the constrained searches" in (tmp_path / "table.md").read_text()
     capsys.readouterr()
     assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--fallback",
                  "--out", str(tmp_path / "p")]) == 2

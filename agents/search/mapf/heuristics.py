@@ -109,8 +109,6 @@ def mvc_components(edges: Edges) -> List[Tuple[List[int], Edges, int]]:
         if val is None:
             if len(comp) > _EXACT_COVER_MAX:
                 val = _packing_bound(cdict)
-            elif not chyper:
-                val = _mvc_exact(comp, adj)
             else:
                 val = _cover_exact(comp, adj, [(e, w) for e, w in cdict.items() if len(e) > 2])
             if len(_mvc_cache) > 100_000:
@@ -136,49 +134,8 @@ def _packing_bound(cedges: Edges) -> int:
     return total
 
 
-def _mvc_exact(comp: List[int], adj: Dict[int, Dict[int, int]]) -> int:
-    order = sorted(comp, key=lambda v: (-len(adj[v]), v))
-    pos = {v: k for k, v in enumerate(order)}
-    n = len(order)
-    nbrs = [[(pos[u], w) for u, w in adj[v].items()] for v in order]
-    maxw = [max(w for _, w in nb) for nb in nbrs]
-    best = [sum(maxw)]
-    x = [0] * n
-
-    def lower(k: int) -> int:
-        # every unassigned vertex needs at least the largest residual towards assigned ones
-        s = 0
-        for v in range(k, n):
-            need = 0
-            for u, w in nbrs[v]:
-                if u < k:
-                    r = w - x[u]
-                    if r > need:
-                        need = r
-            s += need
-        return s
-
-    def rec(k: int, cost: int) -> None:
-        if cost + lower(k) >= best[0]:
-            return
-        if k == n:
-            best[0] = cost
-            return
-        lo = 0
-        for u, w in nbrs[k]:
-            if u < k and w - x[u] > lo:
-                lo = w - x[u]
-        for val in range(lo, maxw[k] + 1):
-            x[k] = val
-            rec(k + 1, cost + val)
-        x[k] = 0
-
-    rec(0, 0)
-    return best[0]
-
-
 def _cover_exact(comp: List[int], adj: Dict[int, Dict[int, int]], hyper: List[Tuple[Tuple[int, ...], int]]) -> int:
-    """Exact :func:`min_vertex_cover` of one component with group constraints (branch and bound).
+    """Exact :func:`min_vertex_cover` of one component, with group constraints if any (branch and bound).
 
     Vertices are assigned in order; a pair constraint is enforced at its later vertex, a group
     constraint at its last member. Some optimum has every ``x_v`` at most the largest weight of
@@ -198,6 +155,7 @@ def _cover_exact(comp: List[int], adj: Dict[int, Dict[int, int]], hyper: List[Tu
     x = [0] * n
 
     def lower(k: int) -> int:
+        # every unassigned vertex needs at least the largest residual towards assigned ones ...
         need = [0] * n
         s = 0
         for v in range(k, n):
@@ -207,6 +165,9 @@ def _cover_exact(comp: List[int], adj: Dict[int, Dict[int, int]], hyper: List[Tu
                     nv = w - x[u]
             need[v] = nv
             s += nv
+        if not groups:
+            return s
+        # ... and the group left furthest from being met by them adds its rest
         extra = 0
         for m, w in groups:
             if m[-1] < k:
