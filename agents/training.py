@@ -86,6 +86,10 @@ class TrainConfig:
     """hidden widths of actor and critic heads"""
     encoder_arch: List[int] = field(default_factory=lambda: [64, 64])
     """hidden widths of the MLP observation encoder"""
+    conv_layers: Optional[List[Tuple[int, int, int]]] = None
+    """``(filters, kernel, stride)`` of each convolution of the image encoder (default: the
+    paper's ``(16, 8, 4), (32, 4, 4)``, which reads only the top-left 20 x 20 pixels of a
+    32 x 32 view; ``(16, 8, 4), (32, 3, 2)`` reads all of it, see :data:`FULL_VIEW_CONV_LAYERS`)"""
     share_encoder: Optional[bool] = None
     """one encoder for actor and critics, trained by the critic losses (default: for images)"""
     augmentation: Optional[str] = None
@@ -144,6 +148,13 @@ class TrainConfig:
             raise ValueError(f"threads must be >= 1, got {self.threads}")
         if self.eval_freq < 1:
             raise ValueError(f"eval_freq must be >= 1, got {self.eval_freq}")
+        if self.conv_layers is not None:
+            if not self.conv_layers or any(len(c) != 3 or min(int(v) for v in c) < 1 for c in self.conv_layers):
+                raise ValueError("conv_layers must be one or more (filters, kernel, stride) triples of positive "
+                                 f"integers, got {self.conv_layers!r}")
+            if self.init:
+                raise ValueError("conv_layers shapes a new encoder; a stage started from --init keeps the "
+                                 "checkpoint's encoder")
         if self.init and not os.path.exists(self.init):
             raise FileNotFoundError(f"init checkpoint {self.init!r} does not exist")
 
@@ -162,6 +173,12 @@ class TrainConfig:
 
     def resolved_out_dir(self) -> str:
         return self.out_dir or os.path.join("runs", f"{self.env_id.split(':')[-1]}-{self.stage}-s{self.seed}")
+
+
+FULL_VIEW_CONV_LAYERS: Tuple[Tuple[int, int, int], ...] = ((16, 8, 4), (32, 3, 2))
+"""An image encoder that reads every pixel of a 32 x 32 view (the paper's second layer,
+``(32, 4, 4)``, reaches only the top-left 20 x 20): the first layer as in the paper, the second
+with a 3 x 3 kernel at stride 2, a 3 x 3 map of 32 channels per view."""
 
 
 def default_eval_distances(env_id: str) -> Tuple[float, float]:
@@ -187,6 +204,13 @@ def _sampler_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
     if cfg.sampler == "uniform":
         return {}
     raise ValueError(f"sampler must be 'self', 'oracle' or 'uniform', got {cfg.sampler!r}")
+
+
+def _extractor_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
+    kwargs: Dict[str, Any] = {"net_arch": list(cfg.encoder_arch)}
+    if cfg.conv_layers is not None:
+        kwargs["conv_layers"] = [tuple(int(v) for v in c) for c in cfg.conv_layers]
+    return kwargs
 
 
 def build_model(cfg: TrainConfig):
@@ -231,7 +255,7 @@ def build_model(cfg: TrainConfig):
         policy_kwargs=dict(net_arch=list(cfg.net_arch), n_critics=cfg.n_critics,
                            n_cost_critics=cfg.n_cost_critics, n_distance_bins=int(bins),
                            n_cost_bins=cfg.cost_bins, cost_max=cfg.cost_max, share_encoder=cfg.share_encoder,
-                           features_extractor_kwargs={"net_arch": list(cfg.encoder_arch)}),
+                           features_extractor_kwargs=_extractor_kwargs(cfg)),
         augmentation=cfg.augmentation,
         actor_preactivation_penalty=(cfg.actor_penalty if cfg.actor_penalty is not None
                                      else (0.01 if image else 0.0)),

@@ -15,7 +15,9 @@ One update = one minibatch (64 by default) through 3 distance critics and 3 cost
 - the new layout: one shared encoder trained by the critic losses, the actor on detached
   features, observation and goal encoded in one pass, the next observation by the target
   encoder only (the default for images);
-- the new layout with DrQ's random-shift augmentation.
+- the new layout with DrQ's random-shift augmentation;
+- the new layout with the full-view encoder (``agents.training.FULL_VIEW_CONV_LAYERS``: the
+  paper's second layer reads only the top-left 20 x 20 pixels of a 32 x 32 view, this one all).
 
 A last line times the whole training loop (environment step, replay, one update per step) of
 the new layout. The replay buffer is filled by a short random run first.
@@ -25,7 +27,7 @@ from __future__ import annotations
 import argparse
 import time
 from contextlib import contextmanager
-from typing import Dict, Iterator, Optional
+from typing import Dict, Iterator, Optional, Sequence, Tuple
 
 import gymnasium as gym
 import torch
@@ -34,6 +36,7 @@ from stable_baselines3.common.logger import configure
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3
 from agents.policies import PanoramaEncoder, is_image_space
+from agents.training import FULL_VIEW_CONV_LAYERS
 
 
 @contextmanager
@@ -47,14 +50,17 @@ def plain_conv_stack() -> Iterator[None]:
         PanoramaEncoder.forward = fast
 
 
-def make_model(env_id: str, share: Optional[bool], augmentation: Optional[str], batch: int) -> SafeGoalTD3:
+def make_model(env_id: str, share: Optional[bool], augmentation: Optional[str], batch: int,
+               conv_layers: Optional[Sequence[Tuple[int, int, int]]] = None) -> SafeGoalTD3:
     env = gym.make(env_id)
     image = is_image_space(env.observation_space["observation"])
+    extractor = {} if conv_layers is None else {"conv_layers": list(conv_layers)}
     model = SafeGoalTD3(
         "MultiInputPolicy", env, batch_size=batch, learning_starts=0, seed=0, device="cpu",
         problem_sampler="uniform", augmentation=augmentation,
         replay_buffer_kwargs=dict(achieved_goal_is_observation=image),
-        policy_kwargs=dict(net_arch=[64, 64], n_critics=3, n_cost_critics=3, share_encoder=share))
+        policy_kwargs=dict(net_arch=[64, 64], n_critics=3, n_cost_critics=3, share_encoder=share,
+                           features_extractor_kwargs=extractor))
     model.set_logger(configure(None, []))
     model.train = lambda *a, **k: None  # fill the buffer without learning
     model.learn(400)
@@ -87,11 +93,12 @@ def main() -> None:
     threads = args.threads or sorted({default_threads, 1}, reverse=True)
 
     rows = [
-        ("vector, an MLP extractor per network", "SafeCentralObstacle-v0", False, None, False),
-        ("panorama, old: an extractor per network, plain conv", "SafeApartment0-v0", False, None, True),
-        ("panorama, an extractor per network, fast encoder", "SafeApartment0-v0", False, None, False),
-        ("panorama, new: one shared encoder (default)", "SafeApartment0-v0", True, None, False),
-        ("panorama, new + random shift", "SafeApartment0-v0", True, "shift", False),
+        ("vector, an MLP extractor per network", "SafeCentralObstacle-v0", False, None, False, None),
+        ("panorama, old: an extractor per network, plain conv", "SafeApartment0-v0", False, None, True, None),
+        ("panorama, an extractor per network, fast encoder", "SafeApartment0-v0", False, None, False, None),
+        ("panorama, new: one shared encoder (default)", "SafeApartment0-v0", True, None, False, None),
+        ("panorama, new + random shift", "SafeApartment0-v0", True, "shift", False, None),
+        ("panorama, new + full-view encoder", "SafeApartment0-v0", True, None, False, FULL_VIEW_CONV_LAYERS),
     ]
     print(f"gradient updates/s, batch {args.batch}, 3 + 3 critics, heads 64-64 "
           f"({args.updates} timed updates per row; torch default threads here: {default_threads})")
@@ -99,8 +106,8 @@ def main() -> None:
     for n in threads:
         torch.set_num_threads(n)
         results[n] = {}
-        for label, env_id, share, aug, plain in rows:
-            model = make_model(env_id, share, aug, args.batch)
+        for label, env_id, share, aug, plain, conv in rows:
+            model = make_model(env_id, share, aug, args.batch, conv)
             if plain:
                 with plain_conv_stack():
                     ups = updates_per_second(model, args.updates, args.batch)

@@ -75,6 +75,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--n-cost-critics", type=int, default=d.n_cost_critics)
     g.add_argument("--net-arch", type=int, nargs="+", default=d.net_arch, help="hidden widths of the heads")
     g.add_argument("--encoder-arch", type=int, nargs="+", default=d.encoder_arch, help="MLP encoder widths")
+    g.add_argument("--conv-layers", type=_conv_layer, nargs="+", default=None, metavar="F,K,S",
+                   help="image encoder convolutions as filters,kernel,stride (default: the paper's 16,8,4 32,4,4, "
+                        "which reads the top-left 20 x 20 pixels of a 32 x 32 view; 16,8,4 32,3,2 reads all)")
     g.add_argument("--share-encoder", dest="share_encoder", action="store_true", default=None,
                    help="one encoder for actor and critics, trained by the critic losses (default for images)")
     g.add_argument("--separate-encoders", dest="share_encoder", action="store_false",
@@ -109,6 +112,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--verbose", type=int, default=d.verbose)
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
+
+
+def _conv_layer(text: str) -> tuple:
+    """``"16,8,4"`` -> ``(16, 8, 4)`` for ``--conv-layers``."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"expected filters,kernel,stride (three positive integers), got {text!r}")
+    return values
 
 
 def config_from_args(args: argparse.Namespace):

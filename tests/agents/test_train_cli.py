@@ -109,3 +109,44 @@ def test_seeds_serially_and_on_ray_give_the_same_runs(tmp_path, capsys):
 def test_ray_without_seeds_is_refused(tmp_path, capsys):
     assert main(["train", "--ray", "--out", str(tmp_path), *TINY]) == 2
     assert "--seeds" in capsys.readouterr().err
+
+
+def test_conv_layers_shape_a_new_image_encoder_and_survive_save_load(tmp_path):
+    import argparse
+
+    from agents.training import FULL_VIEW_CONV_LAYERS, build_model
+    from baselines.commands import train as train_cmd
+
+    parser = argparse.ArgumentParser()
+    train_cmd.register(parser.add_subparsers())
+    args = parser.parse_args(["train", "--env", "SafeApartment0-v0", "--conv-layers", "16,8,4", "32,3,2",
+                              "--buffer-size", "500"])
+    cfg = train_cmd.config_from_args(args)
+    assert [tuple(c) for c in cfg.conv_layers] == list(FULL_VIEW_CONV_LAYERS)
+    cfg.validate()
+    model = build_model(cfg)
+    enc = model.policy.encoder.encoder
+    assert enc.read_size == (32, 32)  # every pixel of each view (the paper's layers: 20 x 20)
+    model.save(tmp_path / "m.zip")
+    loaded = SafeGoalTD3.load(tmp_path / "m.zip")
+    assert loaded.policy.encoder.encoder.read_size == (32, 32)
+    x = th.randint(0, 256, (2, 4, 32, 32, 4), dtype=th.uint8)
+    assert th.equal(enc(x), loaded.policy.encoder.encoder(x))
+
+
+@pytest.mark.parametrize("value", ["16,8", "16,8,x", "16,0,4"])
+def test_bad_conv_layers_are_refused_by_name(value, capsys):
+    with pytest.raises(SystemExit):
+        main(["train", "--conv-layers", value, *TINY])
+    assert "filters,kernel,stride" in capsys.readouterr().err
+
+
+def test_conv_layers_do_not_apply_to_a_fine_tuned_checkpoint(tmp_path):
+    from agents.training import TrainConfig
+
+    ckpt = tmp_path / "m.zip"
+    ckpt.write_bytes(b"")
+    with pytest.raises(ValueError, match="keeps the checkpoint's encoder"):
+        TrainConfig(stage="constrained", init=str(ckpt), conv_layers=[(16, 8, 4)]).validate()
+    with pytest.raises(ValueError, match="triples of positive integers"):
+        TrainConfig(conv_layers=[(16, 8)]).validate()
