@@ -3,6 +3,11 @@
     python examples/visual_navigation_figure.py                       # SafeApartment0-v0
     python examples/visual_navigation_figure.py --env SafeApartment2-v0 --difficulty hard
 
+Ours runs as in the Table II runs: its cost cut-off is the one chosen on validation problems
+(``examples/table2/apt<k>/c_max.json`` where it exists, for 1 and 4 agents the entries for 1 and
+5; ``--c-max`` overrides) and a leg on which the constrained policy is stuck is handed to the
+unconstrained one (``--no-fallback`` turns that off).
+
 Writes two PNGs (default ``examples/figures/``):
 
 - ``visual_navigation.png``: one agent planned and driven by our method (constrained search on
@@ -15,9 +20,11 @@ Writes two PNGs (default ``examples/figures/``):
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
+from typing import Dict, Optional
 
 import numpy as np
 import torch
@@ -28,19 +35,36 @@ from panorama_contact_sheet import panorama_strip  # noqa: E402
 from agents import load_pretrained  # noqa: E402
 from baselines.evaluation import EvaluationSetup, make_problems  # noqa: E402
 from baselines.figures import trajectory_figure  # noqa: E402
-from baselines.methods import METHODS, execute  # noqa: E402
+from baselines.methods import METHODS, Method, execute  # noqa: E402
 
 HERE = Path(__file__).parent
 
 
-def pick_problem(setup: EvaluationSetup, difficulty: str, seed: int, tries: int = 20):
+def chosen_c_max(env_id: str, path: Optional[Path] = None) -> Dict[int, float]:
+    """The validation-chosen c_max per agent count of ``env_id``'s Table II folder ({} if none)."""
+    if path is None:
+        digits = "".join(ch for ch in env_id.split("-")[0] if ch.isdigit())
+        path = HERE / "table2" / f"apt{digits}" / "c_max.json"
+    if not path.exists():
+        return {}
+    return {int(k): float(v) for k, v in json.loads(path.read_text())["chosen"].items()}
+
+
+def ours_method(c_max: Optional[float], fallback: bool) -> Method:
+    m = METHODS["ours"]
+    if c_max is not None:
+        m = m.with_options(c_max=c_max)
+    return m.with_options(fallback="unconstrained") if fallback else m
+
+
+def pick_problem(setup: EvaluationSetup, difficulty: str, seed: int, ours: Method, tries: int = 20):
     """The first single-agent problem on which ours plans through at least two waypoints."""
     import safe_mapf_envs as sme
 
     env = sme.parallel_env(setup.env_id, n_agents=1, max_cycles=300)
     best = None
     for prob in make_problems(setup, difficulty, 1, tries, seed=seed):
-        ex = execute(env, METHODS["ours"], setup.models, setup.planner, prob.starts, prob.goals, seed=seed)
+        ex = execute(env, ours, setup.models, setup.planner, prob.starts, prob.goals, seed=seed)
         n_wp = len(ex.extra.get("nodes", [[0]])[0]) - 1
         if ex.success and n_wp >= 2:
             return prob, ex, env
@@ -51,13 +75,14 @@ def pick_problem(setup: EvaluationSetup, difficulty: str, seed: int, tries: int 
     return best[0], best[1], env
 
 
-def navigation_figure(setup: EvaluationSetup, difficulty: str, seed: int, path: Path, frames: int = 6) -> Path:
+def navigation_figure(setup: EvaluationSetup, difficulty: str, seed: int, path: Path, ours: Method,
+                      frames: int = 6) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    prob, ex, env = pick_problem(setup, difficulty, seed)
+    prob, ex, env = pick_problem(setup, difficulty, seed, ours)
     field = env.field
     sensor = env.sensor
     node_ids = np.asarray(ex.extra["nodes"][0][1:], dtype=np.int64)  # waypoints (start node excluded)
@@ -122,12 +147,21 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--nodes", type=int, default=1000)
     p.add_argument("--out", type=Path, default=HERE / "figures")
+    p.add_argument("--c-max", type=float, default=None,
+                   help="ours' cost cut-off (default: examples/table2/apt<k>/c_max.json, else the method's)")
+    p.add_argument("--no-fallback", dest="fallback", action="store_false",
+                   help="no unconstrained fallback for a stuck leg of ours")
     args = p.parse_args()
+    chosen = chosen_c_max(args.env)
+    single = args.c_max if args.c_max is not None else chosen.get(1)
+    multi = args.c_max if args.c_max is not None else chosen.get(5)
     torch.set_num_threads(1)
     models = {k: load_pretrained(args.env, k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
-    print(navigation_figure(setup, args.difficulty, args.seed, args.out / "visual_navigation.png"))
-    print(trajectory_figure(setup, [METHODS["sorb"], METHODS["ours"]], args.out / "visual_multi_agent.png",
+    print(navigation_figure(setup, args.difficulty, args.seed, args.out / "visual_navigation.png",
+                            ours_method(single, args.fallback)))
+    print(trajectory_figure(setup, [METHODS["sorb"], ours_method(multi, args.fallback)],
+                            args.out / "visual_multi_agent.png",
                             agent_counts=(4,), difficulty=args.difficulty, seed=args.seed, problems=(0,)))
 
 
