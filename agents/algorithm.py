@@ -555,6 +555,13 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         with torch_threads(inference_threads(threads)):
             return self.policy.pairwise(obs_a, obs_b, ("cost",), aggregate, chunk_size, progress=progress)["cost"]
 
+    def encode_observations(self, obs: np.ndarray, threads: Optional[int] = None):
+        """Encode a batch of observations once: the result stands in for ``obs`` in
+        :meth:`pairwise`, :meth:`pairwise_distance` and :meth:`pairwise_cost` (a planner's graph
+        nodes, scored against every new start and goal). Stale once the model trains further."""
+        with torch_threads(inference_threads(threads)):
+            return self.policy.encode_observations(obs)
+
     def pairwise(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
                  chunk_size: int = 2048, threads: Optional[int] = None,
                  progress: Optional[bool] = None) -> Tuple[np.ndarray, np.ndarray]:

@@ -382,6 +382,24 @@ def aggregate_ensemble(values: th.Tensor, aggregate: str) -> th.Tensor:
 
 
 # --------------------------------------------------------------------------- the policy
+class EncodedObservations:
+    """Codes of a batch of raw observations under each encoder of one policy.
+
+    Made by :meth:`SafeGoalPolicy.encode_observations`; :meth:`SafeGoalPolicy.pairwise` takes it
+    in place of the raw batch, so that observations scored again and again (a planner's graph
+    nodes, against every new start and goal) are encoded once. Valid for the policy that made
+    it, as long as its encoders are not trained further.
+    """
+
+    def __init__(self, policy: "SafeGoalPolicy", codes: Dict[int, th.Tensor], n: int) -> None:
+        self._policy_id = id(policy)
+        self.codes = codes  # id(features extractor) -> (n, code_dim)
+        self.n = int(n)
+
+    def __len__(self) -> int:
+        return self.n
+
+
 class SafeGoalPolicy(BasePolicy):
     """Actor, distance-critic ensemble and cost-critic ensemble (plus targets) of the safe agent.
 
@@ -653,6 +671,28 @@ class SafeGoalPolicy(BasePolicy):
         if bad or not quantities:
             raise ValueError(f"quantities must be a non-empty subset of ('distance', 'cost'), got {list(quantities)!r}")
 
+    def _extractors(self) -> List[GoalPairExtractor]:
+        """The distinct encoders that :meth:`pairwise` reads (one with a shared encoder)."""
+        out: Dict[int, GoalPairExtractor] = {}
+        for net in (self.actor, self.critic, self.cost_critic):
+            out.setdefault(id(net.features_extractor), cast(GoalPairExtractor, net.features_extractor))
+        return list(out.values())
+
+    @th.inference_mode()
+    def encode_observations(self, obs: Any) -> EncodedObservations:
+        """Encode a batch of raw observations ``(N, *obs_shape)`` once for later :meth:`pairwise` calls."""
+        x, single = self._as_batch(obs, "obs")
+        if single:
+            raise ValueError(f"encode_observations takes a batch (N, *{tuple(x.shape[1:])}), got one observation")
+        return EncodedObservations(self, {id(fe): _encode_chunked(fe, x) for fe in self._extractors()}, x.shape[0])
+
+    def _pair_input(self, x: Any, what: str) -> Union[th.Tensor, EncodedObservations]:
+        if isinstance(x, EncodedObservations):
+            if x._policy_id != id(self):
+                raise ValueError(f"{what} was encoded by another policy")
+            return x
+        return self._as_batch(x, what)[0]
+
     @th.inference_mode()
     def pairwise(
         self,
@@ -666,7 +706,8 @@ class SafeGoalPolicy(BasePolicy):
         """Distance and/or cost from every ``obs_a[i]`` to every ``obs_b[j]``: ``(N, M)`` float32 arrays.
 
         ``obs_a`` ``(N, *obs_shape)`` and ``obs_b`` ``(M, *obs_shape)`` are raw observations
-        (``obs_b`` used as goals). Each observation is encoded once per network and its
+        (``obs_b`` used as goals), or :class:`EncodedObservations` from
+        :meth:`encode_observations`. Each observation is encoded once per network and its
         first-layer product computed once; a pair then costs a broadcast sum and the remaining
         small layers. The actor's action for a pair is computed once and shared by both
         critics. Pairs are processed in blocks of about ``chunk_size`` (memory stays bounded
@@ -680,15 +721,17 @@ class SafeGoalPolicy(BasePolicy):
             raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
         if int(chunk_size) < 1:
             raise ValueError(f"chunk_size must be >= 1, got {chunk_size!r}")
-        a, _ = self._as_batch(obs_a, "obs_a")
-        b, _ = self._as_batch(obs_b, "obs_b")
-        n, m = a.shape[0], b.shape[0]
+        a, b = self._pair_input(obs_a, "obs_a"), self._pair_input(obs_b, "obs_b")
+        n, m = len(a), len(b)
         critics = {q: (self.critic if q == "distance" else self.cost_critic) for q in quantities}
         codes: Dict[int, Tuple[th.Tensor, th.Tensor]] = {}  # a shared encoder encodes once
 
+        def code(fe: GoalPairExtractor, x: Union[th.Tensor, EncodedObservations]) -> th.Tensor:
+            return x.codes[id(fe)] if isinstance(x, EncodedObservations) else _encode_chunked(fe, x)
+
         def encoded(fe: GoalPairExtractor) -> Tuple[th.Tensor, th.Tensor]:
             if id(fe) not in codes:
-                codes[id(fe)] = (_encode_chunked(fe, a), _encode_chunked(fe, b))
+                codes[id(fe)] = (code(fe, a), code(fe, b))
             return codes[id(fe)]
 
         code_a, code_b = encoded(self.actor.features_extractor)

@@ -28,6 +28,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
+from agents.search.graph import NodePairwise
 from agents.search.planner import BufferPlanner
 
 from .methods import METHODS, Method, execute
@@ -78,7 +79,7 @@ class EvaluationSetup:
     def __post_init__(self) -> None:
         unc = self.models["unconstrained"]
         self.planner = BufferPlanner(
-            self.observations, self.D, self.C, lambda a, b: unc.pairwise(a, b, aggregate="max"),
+            self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
             d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
             time_limit=self.cbs_time_limit)
         # problem difficulty: shortest predicted distances on the planner's own buffer graph

@@ -24,6 +24,34 @@ from scipy.sparse.csgraph import dijkstra
 PairwiseFn = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
 
 
+class NodePairwise:
+    """``pairwise(obs_a, obs_b) -> (D, C)`` of a critic model that encodes the graph's nodes once.
+
+    ``model`` is a :class:`~agents.algorithm.SafeGoalTD3` (anything with ``pairwise(a, b,
+    aggregate=...)``; with ``encode_observations(obs)`` too, the codes of ``nodes`` are computed
+    on the first call that passes that very array and reused after). A planner scores its nodes
+    against every new start and goal, at every replan, so this saves encoding them each time
+    (1000 panoramas: two passes of the image encoder per replan). The result is the same as
+    ``model.pairwise(a, b, aggregate=aggregate)``. The model must not train while this is in use.
+    """
+
+    def __init__(self, model, nodes: np.ndarray, aggregate: str = "max") -> None:
+        self.model = model
+        self.nodes = nodes
+        self.aggregate = aggregate
+        self._codes = None
+
+    def _arg(self, x):
+        if x is not self.nodes or not hasattr(self.model, "encode_observations"):
+            return x
+        if self._codes is None:
+            self._codes = self.model.encode_observations(self.nodes)
+        return self._codes
+
+    def __call__(self, obs_a: np.ndarray, obs_b: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        return self.model.pairwise(self._arg(obs_a), self._arg(obs_b), aggregate=self.aggregate)
+
+
 #: sparse storage drops zeros, so kept edges carry at least these weights
 _MIN_DISTANCE = 1e-9
 _MIN_COST = 1e-12
@@ -460,5 +488,5 @@ def build_problem_graph(
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 
 
-__all__ = ["PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
+__all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
            "edge_mask", "problem_edge_mask", "relax_cost_locally"]

@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from .cbs import CBSResult, solve_cbs
 from .controller import AgentPlan
-from .graph import PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
+from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf_instance import Proximity
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 
@@ -259,10 +259,7 @@ class BufferPlanner:
     def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max", **kwargs) -> "BufferPlanner":
         """Compute ``D`` and ``C`` with ``agent.pairwise`` (ensemble aggregated by ``aggregate``)."""
         obs = np.asarray(observations)
-
-        def pairwise(a, b):
-            return agent.pairwise(a, b, aggregate=aggregate)
-
+        pairwise = NodePairwise(agent, obs, aggregate)  # the nodes are encoded once
         D, C = pairwise(obs, obs)
         return cls(obs, D, C, pairwise, **kwargs)
 

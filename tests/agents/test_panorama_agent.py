@@ -157,3 +157,37 @@ def test_a_short_panorama_run_learns_distances():
     model.learn(1200)
     after = spearmanr(model.distance(obs_s, obs_g), geo).statistic
     assert after > 0.3 and after > before + 0.2, f"Spearman {before:.3f} -> {after:.3f}"
+
+
+def test_pre_encoded_nodes_score_like_raw_ones_and_are_encoded_once(small):
+    from agents.search.graph import NodePairwise
+
+    env = gym.make(ENV)
+    rng = np.random.default_rng(3)
+    nodes = observations_at(env, env.unwrapped.sample_states(40, rng))
+    ends = observations_at(env, env.unwrapped.sample_states(6, rng))
+    raw = small.pairwise(nodes, ends)
+    codes = small.encode_observations(nodes)
+    assert len(codes) == 40
+    for a, b in zip(small.pairwise(codes, ends), raw):
+        assert np.allclose(a, b, atol=1e-5)
+    for a, b in zip(small.pairwise(ends, codes), small.pairwise(ends, nodes)):
+        assert np.allclose(a, b, atol=1e-5)
+
+    encoder = small.policy.encoder.encoder
+    batch_sizes = []
+    hook = encoder.register_forward_hook(lambda m, inp, out: batch_sizes.append(inp[0].shape[0]))
+    try:
+        fn = NodePairwise(small, nodes)
+        for _ in range(3):  # e.g. three replans against new ends
+            for a, b in zip(fn(nodes, ends), raw):
+                assert np.allclose(a, b, atol=1e-5)
+            fn(ends, nodes)
+    finally:
+        hook.remove()
+    assert sum(s == 40 for s in batch_sizes) == 1  # the nodes once, the ends at every call
+    other = model_on()
+    with pytest.raises(ValueError, match="encoded by another policy"):
+        other.pairwise(codes, ends)
+    with pytest.raises(ValueError, match="takes a batch"):
+        small.encode_observations(nodes[0])
