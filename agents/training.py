@@ -93,7 +93,8 @@ class TrainConfig:
     share_encoder: Optional[bool] = None
     """one encoder for actor and critics, trained by the critic losses (default: for images)"""
     augmentation: Optional[str] = None
-    """image augmentation of the shared encoder: None or 'shift' (DrQ's random shift)"""
+    """image augmentation of the shared encoder: None or 'shift' (DrQ's random shift); with
+    ``init``, None keeps the checkpoint's setting"""
     actor_penalty: Optional[float] = None
     """weight of the actor's pre-tanh penalty (default: 0.01 for panoramas, 0 for vectors)"""
     distance_bins: Optional[int] = None
@@ -240,7 +241,8 @@ def build_model(cfg: TrainConfig):
             batch_size=cfg.batch_size, learning_rate=cfg.resolved_learning_rate(image),
             actor_learning_rate=cfg.actor_learning_rate, problem_sampler=cfg.sampler,
             problem_sampler_kwargs=sampler_kwargs, constrained=constrained,
-            lagrange_update_episodes=cfg.lagrange_update_episodes, tensorboard_log=cfg.tensorboard_log, **lagrange)
+            lagrange_update_episodes=cfg.lagrange_update_episodes, tensorboard_log=cfg.tensorboard_log,
+            **({"augmentation": cfg.augmentation} if cfg.augmentation is not None else {}), **lagrange)
         if model.env_id is not None and model.env_id != cfg.env_id.split(":")[-1]:
             raise ValueError(f"checkpoint {cfg.init!r} was trained on {model.env_id!r}, not {cfg.env_id!r}")
         return model
