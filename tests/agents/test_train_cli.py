@@ -153,9 +153,10 @@ def test_conv_layers_do_not_apply_to_a_fine_tuned_checkpoint(tmp_path):
 
 
 def test_augmentation_can_be_switched_on_when_continuing_a_checkpoint():
+    from agents.pretrained import pretrained_path
     from agents.training import TrainConfig, build_model
 
-    ckpt = "agents/pretrained/SafeApartment0-v0_unconstrained.zip"
+    ckpt = pretrained_path("SafeApartment0-v0")
     on = build_model(TrainConfig(env_id="SafeApartment0-v0", init=ckpt, augmentation="shift", buffer_size=200))
     assert on.augmentation == "shift" and on.augment is not None
     kept = build_model(TrainConfig(env_id="SafeApartment0-v0", init=ckpt, buffer_size=200))
