@@ -17,7 +17,8 @@ One update = one minibatch (64 by default) through 3 distance critics and 3 cost
   encoder only (the default for images);
 - the new layout with DrQ's random-shift augmentation;
 - the new layout with the full-view encoder (``agents.training.FULL_VIEW_CONV_LAYERS``: the
-  paper's second layer reads only the top-left 20 x 20 pixels of a 32 x 32 view, this one all).
+  paper's layers read only the top-left 20 x 20 pixels of a 32 x 32 view, this one all), and
+  with ``(16, 8, 8), (32, 4, 4)`` (every pixel, in non-overlapping 8 x 8 patches).
 
 A last line times the whole training loop (environment step, replay, one update per step) of
 the new layout. The replay buffer is filled by a short random run first.
@@ -99,6 +100,7 @@ def main() -> None:
         ("panorama, new: one shared encoder (default)", "SafeApartment0-v0", True, None, False, None),
         ("panorama, new + random shift", "SafeApartment0-v0", True, "shift", False, None),
         ("panorama, new + full-view encoder", "SafeApartment0-v0", True, None, False, FULL_VIEW_CONV_LAYERS),
+        ("panorama, new + full view, 8 x 8 patches", "SafeApartment0-v0", True, None, False, ((16, 8, 8), (32, 4, 4))),
     ]
     print(f"gradient updates/s, batch {args.batch}, 3 + 3 critics, heads 64-64 "
           f"({args.updates} timed updates per row; torch default threads here: {default_threads})")
