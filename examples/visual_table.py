@@ -1,7 +1,7 @@
 """The Table II analogue: our four apartments beside the paper's four scenes, in one Markdown table.
 
     for a in 0 1 2 3; do
-        safe-mapf evaluate --env SafeApartment$a-v0 --agents 1 5 10 --problems 20 \
+        safe-mapf evaluate --env SafeApartment$a-v0 --agents 1 5 10 --problems 50 \
             --methods unconstrained_policy sorb constrained_policy ours --policies-at 1 \
             --c-max-from examples/table2/apt$a/c_max.json --fallback --no-figure --out examples/table2/apt$a
     done
