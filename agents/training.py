@@ -236,13 +236,14 @@ def build_model(cfg: TrainConfig):
         lagrange = dict(cost_limit=cfg.cost_limit, lagrange_lr=cfg.lagrange_lr, lagrange_init=cfg.lagrange_init,
                         lagrange_max=cfg.lagrange_max)
     if cfg.init:
+        kept: Dict[str, Any] = {} if cfg.augmentation is None else {"augmentation": cfg.augmentation}
         model = SafeGoalTD3.load(
             cfg.init, env=env, device="cpu", seed=cfg.seed, action_noise=noise, learning_starts=cfg.learning_starts,
             batch_size=cfg.batch_size, learning_rate=cfg.resolved_learning_rate(image),
             actor_learning_rate=cfg.actor_learning_rate, problem_sampler=cfg.sampler,
             problem_sampler_kwargs=sampler_kwargs, constrained=constrained,
             lagrange_update_episodes=cfg.lagrange_update_episodes, tensorboard_log=cfg.tensorboard_log,
-            **({"augmentation": cfg.augmentation} if cfg.augmentation is not None else {}), **lagrange)
+            **kept, **lagrange)  # augmentation None: the checkpoint's setting
         if model.env_id is not None and model.env_id != cfg.env_id.split(":")[-1]:
             raise ValueError(f"checkpoint {cfg.init!r} was trained on {model.env_id!r}, not {cfg.env_id!r}")
         return model
