@@ -392,7 +392,7 @@ class EncodedObservations:
     """
 
     def __init__(self, policy: "SafeGoalPolicy", codes: Dict[int, th.Tensor], n: int) -> None:
-        self._policy_id = id(policy)
+        self.policy = policy  # held, so the encoder ids below stay its own
         self.codes = codes  # id(features extractor) -> (n, code_dim)
         self.n = int(n)
 
@@ -688,7 +688,7 @@ class SafeGoalPolicy(BasePolicy):
 
     def _pair_input(self, x: Any, what: str) -> Union[th.Tensor, EncodedObservations]:
         if isinstance(x, EncodedObservations):
-            if x._policy_id != id(self):
+            if x.policy is not self:
                 raise ValueError(f"{what} was encoded by another policy")
             return x
         return self._as_batch(x, what)[0]
