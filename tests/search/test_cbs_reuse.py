@@ -184,3 +184,37 @@ def test_never_again_cut_offs_keep_the_low_level_exact(seed):
     target = int(rng.integers(n))
     assert earliest_arrival(inst, 0, cc, target, frozenset(), float("inf"), counter) == \
         brute_earliest(adj, s, target, cons, frozenset())
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_mdd_avoidable_matches_the_enumerated_optimal_paths(seed):
+    """``MDD.avoidable`` (unit time: its level shortcuts and its search alike) says whether some
+    optimal path keeps off a node during a window, against every enumerated optimal path."""
+    rng = np.random.default_rng(300 + seed)
+    adj = grid(rng, 3, 4, 0.1)
+    n = len(adj)
+    if n < 4:
+        return
+    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
+    inst = MapfInstance(adj, [s], [g])
+    if inst.h[0][s] >= UNREACHABLE:
+        return
+    cons = EMPTY.add(*random_constraints(rng, 0, n, 6, 2))
+    cc = compile_constraints(cons, n, g)
+    events = space_time_astar(inst, 0, cc, None, float("inf"), Counter())
+    if events is None:
+        return
+    T = events[-1][1]
+    mdd = build_mdd(inst, 0, cc, T)
+    paths = brute_paths(inst, adj, s, g, list(cons), T)
+    assert paths
+    checked = 0
+    for node in range(n):
+        for start in range(T + 2):
+            for end in (start, start + 1, start + 3, None):
+                hi = T + 10 if end is None else end
+                # a path is parked at its goal after T
+                keeps_off = any(all(p[min(t, T)] != node for t in range(start, hi + 1)) for p in paths)
+                assert mdd.avoidable(node, start, True, end) == keeps_off, (node, start, end)
+                checked += 1
+    assert checked > 0

@@ -68,6 +68,21 @@ class MDD:
             return False  # parked there from ``cost`` on
         if start <= 0 <= hi and self.start == node:
             return False
+        if unit:
+            # read the levels first: no level in the window holds the node (some optimal path,
+            # indeed every one, keeps off it), or one holds only the node (none does)
+            levels = self.levels
+            last = min(hi, self.cost)
+            lo = max(start, 0)
+            touched = False
+            for t in range(lo, last + 1):
+                lv = levels[t]
+                if node in lv:
+                    if len(lv) == 1:
+                        return False
+                    touched = True
+            if not touched:
+                return True
         stack = [self.start]
         seen = {self.start}
         while stack:
