@@ -41,7 +41,12 @@ GROUP_BASE_STATES = 50_000
 Edges = Dict[Tuple[int, ...], int]
 
 # ---------------------------------------------------------------------------------- vertex cover
+#: component covers by canonical form (the same shape under other agent ids)
 _mvc_cache: Dict[Tuple[Tuple[Tuple[int, ...], int], ...], int] = {}
+#: whole covers by their exact edges: the child bounds of the f-aware conflict choice ask for the
+#: same reduced graphs again and again (about 96% hits on room-32-32-4 random-4), and this key
+#: costs far less than splitting the graph into components and putting each in canonical form
+_cover_cache: Dict[frozenset, int] = {}
 
 
 def min_vertex_cover(edges: Edges) -> int:
@@ -55,7 +60,14 @@ def min_vertex_cover(edges: Edges) -> int:
     """
     if not edges:
         return 0
-    return sum(val for _, _, val in mvc_components(edges))
+    key = frozenset(edges.items())
+    val = _cover_cache.get(key)
+    if val is None:
+        val = sum(v for _, _, v in mvc_components(edges))
+        if len(_cover_cache) > 100_000:
+            _cover_cache.clear()
+        _cover_cache[key] = val
+    return val
 
 
 def mvc_components(edges: Edges) -> List[Tuple[List[int], Edges, int]]:
