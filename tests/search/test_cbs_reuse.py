@@ -30,6 +30,20 @@ def grid(rng, h, w, p_block):
     return adj
 
 
+def random_agent(rng, h, w, p_block, min_nodes):
+    """A random grid with one agent whose goal is reachable: ``(adj, n, start, goal, instance)``,
+    or ``None`` (too few free cells, or the goal cut off)."""
+    adj = grid(rng, h, w, p_block)
+    n = len(adj)
+    if n < min_nodes:
+        return None
+    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
+    inst = MapfInstance(adj, [s], [g])
+    if inst.h[0][s] >= UNREACHABLE:
+        return None
+    return adj, n, s, g, inst
+
+
 def allowed(cons, v, t):
     """Whether being at ``v`` at time ``t`` is allowed by vertex / range constraints."""
     for c in cons:
@@ -81,14 +95,10 @@ def random_constraints(rng, agent, n, horizon, k):
 @pytest.mark.parametrize("seed", range(12))
 def test_pruned_mdd_is_the_built_mdd_and_holds_exactly_the_allowed_paths(seed):
     rng = np.random.default_rng(seed)
-    adj = grid(rng, 3, 4, 0.15)
-    n = len(adj)
-    if n < 4:
+    made = random_agent(rng, 3, 4, 0.15, 4)
+    if made is None:
         return
-    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
-    inst = MapfInstance(adj, [s], [g])
-    if inst.h[0][s] >= UNREACHABLE:
-        return
+    adj, n, s, g, inst = made
     counter = Counter()
     base = EMPTY.add(*random_constraints(rng, 0, n, 6, 1))
     more = base.add(*random_constraints(rng, 0, n, 6, 2))
@@ -160,14 +170,10 @@ def test_never_again_cut_offs_keep_the_low_level_exact(seed):
     """Agents closed out of nodes for good: costs and earliest arrivals match brute force, and a
     goal cut off for good is reported infeasible."""
     rng = np.random.default_rng(100 + seed)
-    adj = grid(rng, 4, 4, 0.2)
-    n = len(adj)
-    if n < 5:
+    made = random_agent(rng, 4, 4, 0.2, 5)
+    if made is None:
         return
-    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
-    inst = MapfInstance(adj, [s], [g])
-    if inst.h[0][s] >= UNREACHABLE:
-        return
+    adj, n, s, g, inst = made
     # even seeds close every neighbour of the goal (from early times: the goal may be cut off)
     closed = adj[g] if seed % 2 == 0 else [int(x) for x in rng.choice(n, 2, replace=False)]
     cons = [RangeConstraint(0, x, int(rng.integers(0, 8)), FOREVER) for x in closed if x not in (s, g)]
@@ -191,14 +197,10 @@ def test_mdd_avoidable_matches_the_enumerated_optimal_paths(seed):
     """``MDD.avoidable`` (unit time: its level shortcuts and its search alike) says whether some
     optimal path keeps off a node during a window, against every enumerated optimal path."""
     rng = np.random.default_rng(300 + seed)
-    adj = grid(rng, 3, 4, 0.1)
-    n = len(adj)
-    if n < 4:
+    made = random_agent(rng, 3, 4, 0.1, 4)
+    if made is None:
         return
-    s, g = (int(x) for x in rng.choice(n, 2, replace=False))
-    inst = MapfInstance(adj, [s], [g])
-    if inst.h[0][s] >= UNREACHABLE:
-        return
+    adj, n, s, g, inst = made
     cons = EMPTY.add(*random_constraints(rng, 0, n, 6, 2))
     cc = compile_constraints(cons, n, g)
     events = space_time_astar(inst, 0, cc, None, float("inf"), Counter())
