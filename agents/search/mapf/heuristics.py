@@ -43,10 +43,11 @@ Edges = Dict[Tuple[int, ...], int]
 # ---------------------------------------------------------------------------------- vertex cover
 #: component covers by canonical form (the same shape under other agent ids)
 _mvc_cache: Dict[Tuple[Tuple[Tuple[int, ...], int], ...], int] = {}
-#: whole covers by their exact edges: the child bounds of the f-aware conflict choice ask for the
-#: same reduced graphs again and again (about 96% hits on room-32-32-4 random-4), and this key
-#: costs far less than splitting the graph into components and putting each in canonical form
-_cover_cache: Dict[frozenset, int] = {}
+#: whole covers by their edges in dict order (a tuple, which the garbage collector stops tracking):
+#: the child bounds of the f-aware conflict choice ask for the same reduced graphs again and again
+#: (about 95% hits on room-32-32-4), and this key costs far less than splitting the graph into
+#: components and putting each in canonical form
+_cover_cache: Dict[Tuple[Tuple[Tuple[int, ...], int], ...], int] = {}
 
 
 def min_vertex_cover(edges: Edges) -> int:
@@ -60,7 +61,7 @@ def min_vertex_cover(edges: Edges) -> int:
     """
     if not edges:
         return 0
-    key = frozenset(edges.items())
+    key = tuple(edges.items())
     val = _cover_cache.get(key)
     if val is None:
         val = sum(v for _, _, v in mvc_components(edges))
