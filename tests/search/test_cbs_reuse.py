@@ -17,7 +17,7 @@ from agents.search.mapf.constraints import (
 )
 from agents.search.mapf.instance import UNREACHABLE, MapfInstance
 from agents.search.mapf.lowlevel import Counter, earliest_arrival, space_time_astar
-from agents.search.mapf.mdd import build_mdd, prune_mdd
+from agents.search.mapf.mdd import build_mdd, mdds_dependent, prune_mdd
 from agents.search.mapf.paths import AgentPath, satisfies
 
 
@@ -220,3 +220,49 @@ def test_mdd_avoidable_matches_the_enumerated_optimal_paths(seed):
                 assert mdd.avoidable(node, start, True, end) == keeps_off, (node, start, end)
                 checked += 1
     assert checked > 0
+
+
+def walks_conflict(p, q):
+    """Whether two walks (each parked at its last node afterwards) meet at a node or swap."""
+    T = max(len(p), len(q))
+
+    def at(w, t):
+        return w[min(t, len(w) - 1)]
+
+    for t in range(T):
+        if at(p, t) == at(q, t):
+            return True
+        if t + 1 < T and at(p, t) != at(p, t + 1) and at(p, t) == at(q, t + 1) and at(p, t + 1) == at(q, t):
+            return True
+    return False
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_mdds_dependent_matches_the_enumerated_optimal_paths(seed):
+    """Two agents are dependent exactly when no pair of their optimal walks (under random
+    constraints) avoids each other, by enumerating every pair."""
+    rng = np.random.default_rng(500 + seed)
+    adj = grid(rng, 3, 4, 0.1)
+    n = len(adj)
+    if n < 5:
+        return
+    starts = [int(x) for x in rng.choice(n, 2, replace=False)]
+    goals = [int(x) for x in rng.choice(n, 2, replace=False)]
+    inst = MapfInstance(adj, starts, goals)
+    if any(inst.h[a][starts[a]] >= UNREACHABLE for a in range(2)):
+        return
+    mdds, walks = [], []
+    for a in range(2):
+        cons = EMPTY.add(*random_constraints(rng, a, n, 5, int(rng.integers(0, 3))))
+        cc = compile_constraints(cons, n, goals[a])
+        events = space_time_astar(inst, a, cc, None, float("inf"), Counter())
+        if events is None:
+            return
+        T = events[-1][1]
+        mdds.append(build_mdd(inst, a, cc, T))
+        walks.append(brute_paths(inst, adj, starts[a], goals[a], list(cons), T))
+    free = any(not walks_conflict(p, q) for p in walks[0] for q in walks[1])
+    # the depth-first probe alone, the breadth-first search alone, and a probe cut short
+    for probe in (None, 0, 3):
+        assert mdds_dependent(mdds[0], mdds[1], probe_states=probe) == (not free)
+        assert mdds_dependent(mdds[1], mdds[0], probe_states=probe) == (not free)

@@ -236,19 +236,66 @@ def prune_mdd(m: MDD, cc: CompiledConstraints) -> Optional[MDD]:
     return MDD(m.cost, kept, m.start, m.goal, N, True)
 
 
-def mdds_dependent(m1: MDD, m2: MDD, near_mat: Optional[np.ndarray] = None) -> bool:
+def mdds_dependent(m1: MDD, m2: MDD, near_mat: Optional[np.ndarray] = None,
+                   probe_states: Optional[int] = None) -> bool:
     """Unit time: True if no pair of optimal paths (one from each MDD) is conflict-free.
 
-    A joint breadth-first search over both MDDs level by level (an agent past its cost stays
-    at its goal); used by the dependency graph heuristics.
+    First a short depth-first probe over the joint states of both MDDs (an agent past its
+    cost stays at its goal) looks for one conflict-free pair of paths, which independent agents
+    (most of the pairs asked about) have in plenty; when it gives up after a few states per
+    time step (``probe_states``, default ``4 * T + 32`` for the longer cost ``T``), a
+    breadth-first search over the joint states, level by level, decides (its loop repeats the
+    probe's successor rule inline: it is the hot part on dependent pairs). Used by the
+    dependency graph heuristics.
     """
     N = m1.N
     T = max(m1.cost, m2.cost)
+    if T == 0:
+        return False
     k1, k2 = m1.kids(), m2.kids()
     c1, c2 = m1.cost, m2.cost
     g1, g2 = (m1.goal,), (m2.goal,)
+    empty: Tuple[int, ...] = ()
+
+    def joint(t: int, a: int, b: int) -> List[Tuple[int, int]]:
+        na = k1.get(t * N + a, empty) if t < c1 else g1
+        nb = k2.get(t * N + b, empty) if t < c2 else g2
+        out = []
+        for x in na:
+            for y in nb:
+                if x == y or (x == b and y == a):
+                    continue
+                if near_mat is not None and near_mat[x, y]:
+                    continue
+                out.append((x, y))
+        return out
+
+    # the probe: frames [time, children, next child]; a joint state seen before has no
+    # conflict-free continuation (time only grows, so it is not on the stack)
+    NN = N * N
+    seen: Set[int] = set()
+    budget = 4 * T + 32 if probe_states is None else probe_states
+    stack: List[list] = [[0, joint(0, m1.start, m2.start), 0]] if budget > 0 else []
+    while stack and budget > 0:
+        frame = stack[-1]
+        t, kids, k = frame
+        if k == len(kids):
+            stack.pop()
+            continue
+        frame[2] = k + 1
+        x, y = kids[k]
+        nt = t + 1
+        if nt == T:
+            return False
+        code = nt * NN + x * N + y
+        if code in seen:
+            continue
+        seen.add(code)
+        budget -= 1
+        stack.append([nt, joint(nt, x, y), 0])
+    if not stack and budget > 0:
+        return True  # every joint state explored: none reaches the end
     cur = {(m1.start, m2.start)}
-    empty = ()
     for t in range(T):
         nxt = set()
         tN = t * N
