@@ -1,6 +1,6 @@
 """CBS on the MovingAI MAPF benchmark: solved count, median and worst solve time per map.
 
-Run: ``python examples/bench_cbs.py [--data-dir DIR] [--time-limit 60] [--maps NAME ...]
+Run: ``python examples/bench_cbs.py [--data-dir DIR] [--time-limit 60] [--maps [NAME ...]]
 [--scens SCEN ...] [--agents K] [--tiny] [--vanilla | --both | --ablation | --solvers NAME ...]
 [--merge-threshold B|none]
 [--no-disjoint-target] [--sweep [--step 5]] [--out results.csv|results.json] [--ray [ADDRESS]]``
@@ -28,7 +28,8 @@ per solver the instances solved, the median and worst time and the high-level ex
 ...`` does the same with only the named solvers of :data:`SOLVERS` (e.g. ``--solvers cbs
 no-pseudo``). ``--tiny`` adds
 the instances of ``tiny/`` under the data folder (every ``.map`` there with its ``.scen``, all
-its agents), e.g. ``pocket.map``; ``--agents K`` runs ``K`` agents instead of the map's
+its agents), e.g. ``pocket.map``; one named ``infeasible-*`` has no solution and counts as
+solved when it is reported ``infeasible``; ``--agents K`` runs ``K`` agents instead of the map's
 largest count. Every solution is checked with :func:`agents.search.mapf.validate`
 and must be reported optimal; with ``--both`` the two sums of costs must agree wherever both
 solve. The time of an instance is the wall-clock time of ``solve_cbs`` (instance set-up
@@ -113,7 +114,10 @@ def run_one(data: Path, name: str, scen: str, k: Optional[int], solver: str, tim
         valid = not problems
         if problems:
             print(f"  INVALID {solver} {name} {scen} K={k}: {problems[0]}", flush=True)
-    solved = res.status == "optimal" and bool(valid)
+    if scen == "tiny" and name.startswith("infeasible-"):
+        solved = res.status == "infeasible"  # a tiny instance made to have no solution
+    else:
+        solved = res.status == "optimal" and bool(valid)
     return {
         "solver": solver, "map": name, "scen": scen, "agents": len(inst.starts), "status": res.status,
         "solved": solved, "soc": res.soc, "lower_bound": res.lower_bound, "time_s": round(elapsed, 3),
@@ -148,7 +152,7 @@ def print_rows(rows: List[dict]) -> None:
         if row["status"] == "skipped":
             continue
         lb = "" if row["solved"] else f" lb {row['lower_bound']}"
-        print(f"  {row['solver']:11s} {row['map']:16s} {row['scen']:9s} K={row['agents']:2d}  {row['status']:10s} "
+        print(f"  {row['solver']:11s} {row['map']:18s} {row['scen']:9s} K={row['agents']:2d}  {row['status']:10s} "
               f"soc {row['soc']}{lb}  {row['time_s']:7.2f} s  hl {row['hl_expanded']}  "
               f"corridor/pseudo splits {row['corridor_splits']}/{row['pseudo_corridor_splits']}  "
               f"group searches/raised {row['group_searches']}/{row['group_raised']}", flush=True)
@@ -198,8 +202,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--data-dir", type=Path, default=REPO / "examples" / "data" / "movingai",
                     help="folder with maps/ and scens/ (default: examples/data/movingai in the repository)")
     ap.add_argument("--time-limit", type=float, default=60.0, metavar="S", help="seconds per instance (default 60)")
-    ap.add_argument("--maps", nargs="+", default=list(MAX_AGENTS), choices=list(MAX_AGENTS), metavar="NAME",
-                    help=f"maps to run (default all: {' '.join(MAX_AGENTS)})")
+    ap.add_argument("--maps", nargs="*", default=list(MAX_AGENTS), choices=list(MAX_AGENTS), metavar="NAME",
+                    help=f"maps to run (default all: {' '.join(MAX_AGENTS)}; none, with --tiny: the tiny ones only)")
     ap.add_argument("--scens", nargs="+", default=SCENARIOS, choices=SCENARIOS, metavar="SCEN",
                     help="scenarios to run (default all six)")
     ap.add_argument("--agents", type=int, default=None, metavar="K",
@@ -286,10 +290,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         kmax = MAX_AGENTS.get(name, 0) if args.agents is None else args.agents
         for solver in solvers:
             sel = [r for r in rows if r["map"] == name and r["solver"] == solver]
-            print(f"{name:16s} {solver:11s} {summary(sel, args.time_limit)}", flush=True)
+            print(f"{name:18s} {solver:11s} {summary(sel, args.time_limit)}", flush=True)
             if args.sweep and name in MAX_AGENTS:
                 top = [r for r in sel if r["agents"] == kmax]
-                print(f"{'':16s} {solver:11s} at K={kmax}: {summary(top, args.time_limit)}", flush=True)
+                print(f"{'':18s} {solver:11s} at K={kmax}: {summary(top, args.time_limit)}", flush=True)
 
     mismatches = 0
     if args.both:

@@ -38,3 +38,17 @@ def test_bench_cbs_on_ray_gives_the_serial_answers(tmp_path, capsys):
     assert [(s, k) for s, k, *_ in serial] == [("random-1", 12), ("random-1", 24), ("even-1", 12), ("even-1", 24)]
     assert all(status == "optimal" for _, _, status, _, _ in serial)
     assert answers("ray.json") == serial  # same instances, same order, same optimal costs and search
+
+
+def test_bench_cbs_tiny_only_solves_the_tight_ones_and_reports_the_infeasible_ones(tmp_path, capsys):
+    bench = load_bench()
+    assert bench.main(["--tiny", "--maps", "--time-limit", "30", "--out", str(tmp_path / "tiny.json")]) == 0
+    rows = json.loads((tmp_path / "tiny.json").read_text())
+    names = {r["map"] for r in rows}
+    assert {"pocket", "parked", "infeasible-ring", "infeasible-star"} <= names
+    assert all(r["scen"] == "tiny" for r in rows)  # no MovingAI map was run
+    for r in rows:
+        want = "infeasible" if r["map"].startswith("infeasible-") else "optimal"
+        assert r["status"] == want and r["solved"], r
+    assert next(r for r in rows if r["map"] == "pocket")["soc"] == 25
+    assert f"{len(rows)}/{len(rows)} solved" in capsys.readouterr().out

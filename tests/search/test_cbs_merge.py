@@ -1,10 +1,12 @@
 """Meta-agents (MA-CBS), the disjoint target split and the coupled search, against the brute force.
 
-The instances are tiny, tightly coupled grids written as strings (``@`` blocked, ``.`` free):
-corridors with pockets, dead ends, agents parked in the way, and instances with no solution
-although every pair of agents alone has one.
+The instances are tiny, tightly coupled grids shipped beside the MovingAI benchmark files
+(``examples/data/movingai/tiny``, which ``examples/bench_cbs.py --tiny`` runs): corridors with
+pockets, dead ends, agents parked in the way, and instances with no solution although every pair
+of agents alone has one (named ``infeasible-*``).
 """
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from agents.search.mapf import (
     RangeConstraint,
     VertexConstraint,
     compile_constraints,
+    load_instance,
     solve_cbs,
     validate,
 )
@@ -49,43 +52,35 @@ def adjacency(n, edges):
     return adj
 
 
-# (name, map, [(start cell, goal cell), ...])
-TIGHT = [
-    # the issue's pocket.map: two agents swap the ends of a corridor, the third sits in the pocket
-    ("pocket", "@@.@@\n.....", [((1, 0), (1, 4)), ((1, 4), (1, 0)), ((0, 2), (0, 2))]),
-    # the pocket agent must also end up at a corridor end
-    ("pocket-rotate", "@@.@@\n.....", [((1, 0), (1, 4)), ((1, 4), (0, 2)), ((0, 2), (1, 0))]),
-    # a dead end of length two off a corridor
-    ("dead-end", "@.@@\n@.@@\n....", [((2, 0), (2, 3)), ((2, 3), (2, 0)), ((0, 1), (2, 2))]),
-    # two pockets, three agents through one corridor
-    ("two-pockets", "@.@.@\n.....", [((1, 0), (1, 4)), ((1, 4), (1, 0)), ((0, 1), (0, 3))]),
-    # the pocket agent parks in the corridor the others must pass
-    ("parked", "@@.@@\n.....", [((1, 0), (1, 4)), ((1, 3), (1, 0)), ((0, 2), (1, 2))]),
-]
-
-# every pair of agents alone has a solution, the three together have none
-INFEASIBLE = [
-    # a star: three agents on its leaves cannot move past each other
-    ("star", "@.@\n...", [((1, 0), (1, 2)), ((1, 2), (1, 0)), ((0, 1), (0, 1))]),
-    # a tree: a corridor with a pocket next to its end
-    ("tree", "@.@@\n....", [((1, 0), (1, 3)), ((1, 3), (1, 0)), ((0, 1), (0, 1))]),
-    # a pocket agent that parks in the corridor the two others must swap through
-    ("parked", "@.@@@\n.....", [((1, 0), (1, 4)), ((1, 4), (1, 0)), ((0, 1), (1, 2))]),
-    # a ring keeps the cyclic order of the agents on it
-    ("ring", "...\n.@.\n...", [((0, 0), (0, 1)), ((0, 1), (0, 0)), ((1, 0), (1, 0))]),
-]
+TINY = Path(__file__).resolve().parents[2] / "examples" / "data" / "movingai" / "tiny"
+NAMES = sorted(p.stem for p in TINY.glob("*.map"))
+#: pocket: two agents swap the ends of a corridor, the third sits in the pocket; pocket-rotate:
+#: the pocket agent must end at a corridor end; dead-end: a dead end of length two off a
+#: corridor; two-pockets: three agents through one corridor; parked: the pocket agent parks in
+#: the corridor the others pass
+TIGHT = [n for n in NAMES if not n.startswith("infeasible-")]
+#: every pair of agents alone has a solution, the three together none: a star (three agents on
+#: its leaves), a tree (a corridor with a pocket next to its end), an agent parked in the
+#: corridor the two others must swap through, a ring (it keeps the agents' cyclic order)
+INFEASIBLE = [n for n in NAMES if n.startswith("infeasible-")]
 
 
-def build(text, agents):
-    n, edges, index = grid(text)
-    starts = [index[s] for s, _ in agents]
-    goals = [index[g] for _, g in agents]
-    return n, edges, starts, goals
+def test_the_tiny_instances_are_shipped():
+    assert {"pocket", "pocket-rotate", "dead-end", "two-pockets", "parked"} <= set(TIGHT)
+    assert {"infeasible-star", "infeasible-tree", "infeasible-parked", "infeasible-ring"} <= set(INFEASIBLE)
 
 
-@pytest.mark.parametrize("name,text,agents", TIGHT, ids=[t[0] for t in TIGHT])
-def test_tightly_coupled_tiny_instances_are_solved_optimally_and_fast(name, text, agents):
-    n, edges, starts, goals = build(text, agents)
+def build(name):
+    """``(n, edges, starts, goals)`` of a shipped tiny instance (all the agents of its scenario)."""
+    inst = load_instance(TINY / f"{name}.map", TINY / f"{name}.scen")
+    rows, cols = inst.graph.nonzero()
+    edges = {(int(u), int(v)): 1 for u, v in zip(rows, cols) if u != v}
+    return inst.graph.shape[0], edges, inst.starts, inst.goals
+
+
+@pytest.mark.parametrize("name", TIGHT)
+def test_tightly_coupled_tiny_instances_are_solved_optimally_and_fast(name):
+    n, edges, starts, goals = build(name)
     expected = brute_force_soc(n, edges, starts, goals)
     assert expected is not None
     adj = adjacency(n, edges)
@@ -101,9 +96,9 @@ def test_tightly_coupled_tiny_instances_are_solved_optimally_and_fast(name, text
         assert validate(adj, starts, goals, res.paths) == []
 
 
-@pytest.mark.parametrize("name,text,agents", INFEASIBLE, ids=[t[0] for t in INFEASIBLE])
-def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name, text, agents):
-    n, edges, starts, goals = build(text, agents)
+@pytest.mark.parametrize("name", INFEASIBLE)
+def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name):
+    n, edges, starts, goals = build(name)
     assert brute_force_soc(n, edges, starts, goals) is None
     adj = adjacency(n, edges)
     for a in range(3):  # every pair alone has a solution: the pair check cannot tell
@@ -145,7 +140,7 @@ def test_random_tiny_grids_with_merging_match_brute_force(seed):
 
 def test_disjoint_target_split_matches_the_overlapping_one():
     # agent 2 parks in the corridor that agents 0 and 1 pass through
-    n, edges, starts, goals = build(*TIGHT[4][1:])
+    n, edges, starts, goals = build("parked")
     adj = adjacency(n, edges)
     expected = brute_force_soc(n, edges, starts, goals)
     for disjoint in (True, False):
