@@ -244,8 +244,7 @@ def mdds_dependent(m1: MDD, m2: MDD, near_mat: Optional[np.ndarray] = None,
     cost stays at its goal) looks for one conflict-free pair of paths, which independent agents
     (most of the pairs asked about) have in plenty; when it gives up after a few states per
     time step (``probe_states``, default ``4 * T + 32`` for the longer cost ``T``), a
-    breadth-first search over the joint states, level by level, decides (its loop repeats the
-    probe's successor rule inline: it is the hot part on dependent pairs). Used by the
+    breadth-first search over the joint states, level by level, decides. Used by the
     dependency graph heuristics.
     """
     N = m1.N
@@ -297,18 +296,9 @@ def mdds_dependent(m1: MDD, m2: MDD, near_mat: Optional[np.ndarray] = None,
         return True  # every joint state explored: none reaches the end
     cur = {(m1.start, m2.start)}
     for t in range(T):
-        nxt = set()
-        tN = t * N
+        nxt: Set[Tuple[int, int]] = set()
         for a, b in cur:
-            na = k1.get(tN + a, empty) if t < c1 else g1
-            nb = k2.get(tN + b, empty) if t < c2 else g2
-            for x in na:
-                for y in nb:
-                    if x == y or (x == b and y == a):
-                        continue
-                    if near_mat is not None and near_mat[x, y]:
-                        continue
-                    nxt.add((x, y))
+            nxt.update(joint(t, a, b))
         if not nxt:
             return True
         cur = nxt
