@@ -21,19 +21,11 @@ from agents.search.mapf.context import SearchContext
 from agents.search.mapf.heuristics import min_vertex_cover
 from agents.search.mapf.solver import CBSSolver
 
-# more tightly coupled instances: three or four agents that must make way for each other
-MORE = [
-    # two pockets and a dead end below, four agents
-    ("two-pockets-four", "@.@.@\n.....\n@@.@@",
-     [((1, 0), (1, 4)), ((1, 4), (1, 0)), ((0, 1), (0, 3)), ((2, 2), (2, 2))]),
-    # a dead end that two agents must leave for the third
-    ("dead-end-two", "@.@@\n@.@@\n....", [((0, 1), (2, 3)), ((1, 1), (2, 2)), ((2, 3), (0, 1))]),
-    # a T junction: three agents rotate their places
-    ("tee-rotate", "@.@\n...\n@.@", [((0, 1), (1, 0)), ((1, 0), (2, 1)), ((2, 1), (0, 1))]),
-    # a corridor with a pocket above and one below, two agents swap its ends
-    ("parked-middle", "@.@@\n....\n@@.@", [((1, 0), (1, 3)), ((1, 3), (1, 0)), ((0, 1), (2, 2))]),
-]
-CASES = TIGHT + MORE
+#: the shipped tiny instances with solutions, among them three or four agents that must make way
+#: for each other: two-pockets-four (two pockets and a dead end below), dead-end-two (a dead end
+#: two agents must leave for the third), tee-rotate (three agents rotate their places at a T
+#: junction), parked-middle (a corridor with a pocket above and one below)
+CASES = TIGHT
 
 
 def root_bound(adj, starts, goals, group_bounds, **kw):
@@ -72,9 +64,9 @@ def test_group_constraints_on_shared_vertices_count_once():
     assert min_vertex_cover({(0, 1, 2): 3, (2, 3, 4): 3}) == 3  # x_2 = 3 serves both
 
 
-@pytest.mark.parametrize("name,text,agents", CASES, ids=[c[0] for c in CASES])
-def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name, text, agents):
-    n, edges, starts, goals = build(text, agents)
+@pytest.mark.parametrize("name", CASES)
+def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name):
+    n, edges, starts, goals = build(name)
     expected = brute_force_soc(n, edges, starts, goals)
     assert expected is not None
     adj = adjacency(n, edges)
@@ -93,8 +85,8 @@ def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name, t
 
 def test_group_bounds_fire_and_raise_the_root_bound():
     fired = raised = 0
-    for name, text, agents in CASES:
-        n, edges, starts, goals = build(text, agents)
+    for name in CASES:
+        n, edges, starts, goals = build(name)
         adj = adjacency(n, edges)
         plain, _ = root_bound(adj, starts, goals, False)
         grouped, stats = root_bound(adj, starts, goals, True)
@@ -104,7 +96,7 @@ def test_group_bounds_fire_and_raise_the_root_bound():
         assert res.stats.group_searches + res.stats.group_reuses > 0, name
     assert fired > 0 and raised > 0
     # off by default and under vanilla
-    n, edges, starts, goals = build(*TIGHT[1][1:])
+    n, edges, starts, goals = build("pocket-rotate")
     adj = adjacency(n, edges)
     assert solve_cbs(adj, starts, goals, time_limit=10).stats.group_searches == 0
     res = solve_cbs(adj, starts, goals, time_limit=10, vanilla=True, group_bounds=True, node_limit=2000)

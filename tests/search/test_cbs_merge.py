@@ -57,7 +57,7 @@ NAMES = sorted(p.stem for p in TINY.glob("*.map"))
 #: pocket: two agents swap the ends of a corridor, the third sits in the pocket; pocket-rotate:
 #: the pocket agent must end at a corridor end; dead-end: a dead end of length two off a
 #: corridor; two-pockets: three agents through one corridor; parked: the pocket agent parks in
-#: the corridor the others pass
+#: the corridor the others pass (and four more for the group bounds' tests)
 TIGHT = [n for n in NAMES if not n.startswith("infeasible-")]
 #: every pair of agents alone has a solution, the three together none: a star (three agents on
 #: its leaves), a tree (a corridor with a pocket next to its end), an agent parked in the
@@ -66,7 +66,8 @@ INFEASIBLE = [n for n in NAMES if n.startswith("infeasible-")]
 
 
 def test_the_tiny_instances_are_shipped():
-    assert {"pocket", "pocket-rotate", "dead-end", "two-pockets", "parked"} <= set(TIGHT)
+    assert {"pocket", "pocket-rotate", "dead-end", "two-pockets", "parked", "two-pockets-four", "dead-end-two",
+            "tee-rotate", "parked-middle"} <= set(TIGHT)
     assert {"infeasible-star", "infeasible-tree", "infeasible-parked", "infeasible-ring"} <= set(INFEASIBLE)
 
 
