@@ -15,7 +15,7 @@ import pytest
 from cbs_bruteforce import brute_force_soc, random_grid
 from test_cbs_merge import TIGHT, adjacency, build
 
-from agents.search.mapf import EMPTY, solve_cbs, validate
+from agents.search.mapf import EMPTY, heuristics, solve_cbs, validate
 from agents.search.mapf.cbs import CBSSearch
 from agents.search.mapf.context import SearchContext
 from agents.search.mapf.heuristics import min_vertex_cover
@@ -128,3 +128,42 @@ def test_random_tiny_grids_root_bound_admissible_and_optimal(seed):
         res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
         assert res.status == "optimal" and res.soc == expected, (seed, kw, res.status, res.soc, expected)
         assert validate(adj, starts, goals, res.paths) == []
+
+
+def test_child_bounds_of_a_component_too_large_to_cover_exactly_stay_admissible():
+    """A component of more than 12 vertices is covered by a packing bound; that bound minus d
+    never exceeds the exact cover of the graph with i's edges lowered by d (checked by
+    enumeration on 0/1 weights), and it is what the search takes for a child that raises agent
+    i by d when the component is very large."""
+    rng = random.Random(5)
+    n = 13
+    for _ in range(6):
+        edges = {(i, i + 1): 1 for i in range(n - 1)}  # a path keeps it one component
+        for i, j in itertools.combinations(range(n), 2):
+            if j > i + 1 and rng.random() < 0.15:
+                edges[(i, j)] = 1
+        bound = min_vertex_cover(edges)
+        for i in rng.sample(range(n), 3):
+            reduced = {e: (w - 1 if i in e else w) for e, w in edges.items()}
+            pairs = [e for e, w in reduced.items() if w > 0]
+            exact = min(sum(x) for x in itertools.product((0, 1), repeat=n)
+                        if all(x[a] + x[b] >= 1 for a, b in pairs))
+            assert bound - 1 <= exact
+    # the search takes that bound for a forced child of an agent in such a component
+    m = 2 * (heuristics._CHILD_COVER_MAX + 2)
+    starts, goals = list(range(0, m, 2)), list(range(1, m, 2))
+    adj = [[v for v in (u - 1, u + 1) if 0 <= v < m] for u in range(m)]
+    solver = CBSSolver(adj, starts, goals)
+    inst = solver.instance
+    ctx = SearchContext(inst, time.perf_counter() + 30, solver)
+    search = CBSSearch(ctx, list(range(inst.n_agents)), [EMPTY] * inst.n_agents, heuristic="wdg",
+                       prioritize=True, bypass=True, target_reasoning=True, node_limit=None)
+    root = search._root()
+    assert root is not None
+    root.hedges = {(i, i + 1): 2 for i in range(len(starts) - 1)}  # a path through every agent
+    root.hmemo = None
+    total = search._cover_memo(root)["total"]
+    # agent 0 ends the path: the reduced graph's packing bound would be total - 2, below the
+    # bound taken (total - 1); the node's own f is left at g so that no path-max hides it
+    g, f = search._child_bound(root, 0, (), True)
+    assert g == root.g + 1 and f == g + total - 1

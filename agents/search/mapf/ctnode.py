@@ -9,7 +9,7 @@ from .paths import AgentPath
 
 #: Conflicts of a node by local agent pair ``(i, j)``, ``i < j``.
 ConflictMap = Dict[Tuple[int, int], List[Conflict]]
-#: ``{"total": cover value, "where": {agent: (component edges, component value)},
+#: ``{"total": cover value, "where": {agent: (component edges, component value, vertex count)},
 #: (agent, cost increase): child bound, ...}`` (see the heuristics)
 CoverMemo = Dict[Any, Any]
 
