@@ -252,6 +252,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         options["disjoint_target"] = False
     if options and args.ablation:
         ap.error("--ablation sets the options itself: drop --merge-threshold / --no-disjoint-target")
+    if not args.maps and not args.tiny:
+        ap.error("--maps needs map names (none: only with --tiny)")
     tiny = sorted(p.stem for p in (data / "tiny").glob("*.map")) if args.tiny else []
 
     rows: List[dict] = []

@@ -52,3 +52,6 @@ def test_bench_cbs_tiny_only_solves_the_tight_ones_and_reports_the_infeasible_on
         assert r["status"] == want and r["solved"], r
     assert next(r for r in rows if r["map"] == "pocket")["soc"] == 25
     assert f"{len(rows)}/{len(rows)} solved" in capsys.readouterr().out
+    with pytest.raises(SystemExit):  # no maps and no tiny instances: nothing to run
+        bench.main(["--maps"])
+    assert "--maps needs map names" in capsys.readouterr().err

@@ -21,15 +21,14 @@ from agents.search.mapf.context import SearchContext
 from agents.search.mapf.heuristics import min_vertex_cover
 from agents.search.mapf.solver import CBSSolver
 
-#: the shipped tiny instances with solutions, among them three or four agents that must make way
-#: for each other: two-pockets-four (two pockets and a dead end below), dead-end-two (a dead end
-#: two agents must leave for the third), tee-rotate (three agents rotate their places at a T
-#: junction), parked-middle (a corridor with a pocket above and one below)
-CASES = TIGHT
+# the cases are the shipped tiny instances with solutions (TIGHT), among them three or four
+# agents that must make way for each other: two-pockets-four (two pockets and a dead end below),
+# dead-end-two (a dead end two agents must leave for the third), tee-rotate (three agents rotate
+# their places at a T junction), parked-middle (a corridor with a pocket above and one below)
 
 
-def root_bound(adj, starts, goals, group_bounds, **kw):
-    """``(f of the root with its heuristic, stats)`` of the optimal CBS with the default options."""
+def root_search(adj, starts, goals, group_bounds=False, **kw):
+    """``(search, root)``: the optimal CBS search with the default options, and its root."""
     solver = CBSSolver(adj, starts, goals, **kw)
     inst = solver.instance
     ctx = SearchContext(inst, time.perf_counter() + 30, solver)
@@ -38,7 +37,13 @@ def root_bound(adj, starts, goals, group_bounds, **kw):
                        group_bounds=group_bounds, group_limit=20)
     root = search._root()
     assert root is not None
-    return root.g + search._compute_h(root), ctx.stats
+    return search, root
+
+
+def root_bound(adj, starts, goals, group_bounds, **kw):
+    """``(f of the root with its heuristic, stats)`` of the optimal CBS with the default options."""
+    search, root = root_search(adj, starts, goals, group_bounds, **kw)
+    return root.g + search._compute_h(root), search.ctx.stats
 
 
 def test_cover_with_group_constraints_matches_enumeration():
@@ -64,7 +69,7 @@ def test_group_constraints_on_shared_vertices_count_once():
     assert min_vertex_cover({(0, 1, 2): 3, (2, 3, 4): 3}) == 3  # x_2 = 3 serves both
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", TIGHT)
 def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name):
     n, edges, starts, goals = build(name)
     expected = brute_force_soc(n, edges, starts, goals)
@@ -85,7 +90,7 @@ def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name):
 
 def test_group_bounds_fire_and_raise_the_root_bound():
     fired = raised = 0
-    for name in CASES:
+    for name in TIGHT:
         n, edges, starts, goals = build(name)
         adj = adjacency(n, edges)
         plain, _ = root_bound(adj, starts, goals, False)
@@ -153,13 +158,7 @@ def test_child_bounds_of_a_component_too_large_to_cover_exactly_stay_admissible(
     m = 2 * (heuristics._CHILD_COVER_MAX + 2)
     starts, goals = list(range(0, m, 2)), list(range(1, m, 2))
     adj = [[v for v in (u - 1, u + 1) if 0 <= v < m] for u in range(m)]
-    solver = CBSSolver(adj, starts, goals)
-    inst = solver.instance
-    ctx = SearchContext(inst, time.perf_counter() + 30, solver)
-    search = CBSSearch(ctx, list(range(inst.n_agents)), [EMPTY] * inst.n_agents, heuristic="wdg",
-                       prioritize=True, bypass=True, target_reasoning=True, node_limit=None)
-    root = search._root()
-    assert root is not None
+    search, root = root_search(adj, starts, goals)
     root.hedges = {(i, i + 1): 2 for i in range(len(starts) - 1)}  # a path through every agent
     root.hmemo = None
     total = search._cover_memo(root)["total"]
