@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import dijkstra
 from agents.search.graph import NodePairwise
 from agents.search.planner import BufferPlanner
 
+from .anatomy import failures_field
 from .methods import METHODS, Method, execute
 
 DIFFICULTIES = {"easy": 8.0, "medium": 4.0, "hard": 2.0}
@@ -172,7 +173,7 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
-              "steps", "planning_time", "plan_status", "reached", "c_max")
+              "steps", "planning_time", "plan_status", "reached", "c_max", "failures")
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
@@ -197,13 +198,14 @@ def _methods_for(methods: Sequence[Method], k: int, policy_agents: Optional[Sequ
 def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed: int):
     """Run ``method`` on ``problem`` in ``env``; returns ``(row, execution)``. The run is seeded with
     ``seed + problem.index``, wherever it runs."""
-    ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed + problem.index)
+    ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed + problem.index,
+                 node_positions=setup.states)
     row = {
         "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty,
         "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
         "cost_mean": float(ex.cost.mean()), "collisions": ex.collisions, "steps": ex.steps,
         "planning_time": ex.planning_time, "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
-        "c_max": method.c_max if method.search else math.inf,
+        "c_max": method.c_max if method.search else math.inf, "failures": failures_field(ex.failures),
     }
     return row, ex
 

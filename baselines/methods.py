@@ -27,6 +27,8 @@ import numpy as np
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy, distance_fn, policy_fn
 
+from .anatomy import AgentFailure, FailureTracker
+
 
 @dataclass(frozen=True)
 class Method:
@@ -103,6 +105,8 @@ class Execution:
     plan_status: str
     trajectories: np.ndarray  # (T + 1, K, 2) positions, for figures
     extra: Dict[str, Any] = field(default_factory=dict)
+    #: why each agent that did not arrive failed (see :mod:`baselines.anatomy`)
+    failures: List[AgentFailure] = field(default_factory=list)
 
 
 def execute(
@@ -117,6 +121,7 @@ def execute(
     safety_radius: float = 2.0,
     hold: Optional[str] = None,
     ban_radius: float = 3.0,
+    node_positions: Optional[np.ndarray] = None,
 ) -> Execution:
     """Run ``method`` from positions ``starts`` to ``goals`` in the parallel env ``env``.
 
@@ -127,6 +132,10 @@ def execute(
     :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`); a search method's stuck agent
     replans on the same graph without the nodes within ``ban_radius`` of the waypoint it
     failed to reach.
+
+    Every agent that does not arrive gets a reason (:attr:`Execution.failures`, see
+    :mod:`baselines.anatomy`), read from ground truth after the run; ``node_positions`` (the
+    buffer nodes' true positions, for evaluation only) adds the true length of the leg it was on.
     """
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -146,11 +155,15 @@ def execute(
     touching: set = set()
     traj = [env.positions]
     steps = 0
+    step_length = float(getattr(env, "action_scale", 1.0))
+    tracker = FailureTracker(names, step_length, touch=2.0 * env.scenario.agent_radius + 0.5 * step_length)
+    parked_at = np.full(k, -1)
     while env.agents:
         actions, _ = policy.predict({a: obs[a] for a in env.agents})
         obs, _, term, trunc, infos = env.step(actions)
         steps += 1
         traj.append(env.positions)
+        tracker.step(policy.stats.holding, infos, env.agents)
         now = set()
         for a, info in infos.items():
             i = index[a]
@@ -158,6 +171,7 @@ def execute(
             now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
             if term.get(a, False):
                 reached[i] = True
+                parked_at[i] = steps
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
     plan = policy.current_plan
@@ -168,8 +182,27 @@ def execute(
     stats = policy.stats
     extra.update(yields=stats.yields, waits=stats.waits, escapes=stats.escapes, skips=stats.skips,
                  replans=stats.replans)
+    trajectories = np.stack(traj)
+    failures: List[AgentFailure] = []
+    if not reached.all():
+        failures = tracker.diagnose(
+            trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at, _geodesic(env),
+            planned=plan is None or plan.solved, legs={a: policy.leg(a) for a in names},
+            escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
-                     plan.status if plan is not None else "direct", np.stack(traj), extra)
+                     plan.status if plan is not None else "direct", trajectories, extra, failures)
+
+
+def _geodesic(env) -> Any:
+    """``geodesic(a, b) -> float`` on ``env``'s map (ground truth; ``nan`` where a point is not free)."""
+
+    def geodesic(a: np.ndarray, b: np.ndarray) -> float:
+        try:
+            return float(np.asarray(env.geodesic_distance(np.asarray(a, np.float64), np.asarray(b, np.float64))))
+        except ValueError:
+            return math.nan
+
+    return geodesic
 
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "Execution", "METHODS", "Method", "PAPER_METHODS",

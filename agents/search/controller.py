@@ -74,6 +74,11 @@ class ControllerStats:
     fallbacks: int = 0
     fallback_steps: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
+    #: per agent, why it stood still on the last step: ``"wait"`` (its plan's departure time),
+    #: ``"yield:<agent>"`` (another agent with priority was too close) or ``None`` (it moved)
+    holding: Dict[str, Optional[str]] = field(default_factory=dict)
+    #: per agent, times it was found stuck on the way to its current target
+    leg_escapes: Dict[str, int] = field(default_factory=dict)
 
 
 class WaypointController:
@@ -241,6 +246,7 @@ class WaypointController:
                         continue
                     self.index[a] = k + 1
                     self._stuck_count[a] = 0
+                    self.stats.leg_escapes[a] = 0
                     if not (k == 0 and self._at_start[a]):
                         self._reached[a] += 1
                     moved = True
@@ -255,6 +261,7 @@ class WaypointController:
                                          dtype=np.float32).reshape(len(fb), -1)
                 self.stats.fallback_steps += len(fb)
         hold = np.zeros(len(live), dtype=bool)
+        reason: List[Optional[str]] = [None] * len(live)
         # wait at a reached waypoint until the plan's departure time
         for i, a in enumerate(live):
             plan = self.plans[a]
@@ -263,9 +270,15 @@ class WaypointController:
                 at_start = k == 0 and self._at_start[a]
                 if at_start or self.distance(obs[i:i + 1], goals[i:i + 1])[0] < self._thresholds[a][k]:
                     hold[i] = True
+                    reason[i] = "wait"
                     self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
-            hold |= self._yield_mask(live, obs)
+            yielders = self._yield_mask(live, obs)
+            for i, w in yielders.items():
+                if not hold[i]:
+                    reason[i] = f"yield:{live[w]}"
+                hold[i] = True
+        self.stats.holding = {a: reason[i] for i, a in enumerate(live)}
         if self.stuck_window is not None:
             self._unstick(live, obs, hold, actions)
         actions[hold] = 0.0
@@ -288,6 +301,7 @@ class WaypointController:
         self._thresholds[agent] = self._reach_thresholds(plan)
         self._progress.pop(agent, None)
         self._stuck_count[agent] = 0
+        self.stats.leg_escapes[agent] = 0
 
     def _replan(self, agent: str, obs: np.ndarray) -> None:
         assert self.replan is not None
@@ -314,6 +328,7 @@ class WaypointController:
                 continue
             recent.clear()
             self.stats.escapes += 1
+            self.stats.leg_escapes[a] = self.stats.leg_escapes.get(a, 0) + 1
             self._stuck_count[a] += 1
             # escapes grow with each consecutive one on the way to the same target (up to 8x)
             self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
@@ -328,10 +343,12 @@ class WaypointController:
                 elif k < len(self.plans[a].waypoints):  # no planner: head for the next target
                     self.index[a] = k + 1
                     self._stuck_count[a] = 0
+                    self.stats.leg_escapes[a] = 0
                     self.stats.skips += 1
             actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
 
-    def _yield_mask(self, live: List[str], obs: np.ndarray) -> np.ndarray:
+    def _yield_mask(self, live: List[str], obs: np.ndarray) -> Dict[int, int]:
+        """The agents (indices into ``live``) that yield on this step, each to the agent it yields to."""
         n = len(live)
         ii, jj = np.triu_indices(n, 1)
         if self.proximity is not None:
@@ -341,18 +358,18 @@ class WaypointController:
         assert self.safety_radius is not None  # checked by the caller
         close = prox < self.safety_radius
         if not close.any():
-            return np.zeros(n, dtype=bool)
+            return {}
         lag = np.array([self._lag(a) for a in live])
         # the agent further behind its plan has priority; ties go to the lower index
         i_first = (lag[ii] > lag[jj]) | ((lag[ii] == lag[jj]) & (ii < jj))
         loser = np.where(i_first, jj, ii)[close]
         winner = np.where(i_first, ii, jj)[close]
-        hold = np.zeros(n, dtype=bool)
+        hold: Dict[int, int] = {}
         # process pairs in priority order so a yielding agent does not also block others
-        for w, yielder in sorted(zip(winner, loser)):
-            if not hold[w]:
-                hold[yielder] = True
-        self.stats.yields += int(hold.sum())
+        for w, yielder in sorted(zip(winner.tolist(), loser.tolist())):
+            if w not in hold and yielder not in hold:
+                hold[yielder] = w
+        self.stats.yields += len(hold)
         return hold
 
 

@@ -25,12 +25,15 @@ are only called through ``predict``, ``distance`` and ``pairwise``.
 from __future__ import annotations
 
 import inspect
+import math
 import time
+from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
+from .graph import ProblemGraph
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
 
 #: ``policy(obs[B, ...], goal[B, ...]) -> actions[B, 2]``
@@ -121,6 +124,23 @@ def default_controller_options(model: Any) -> Dict[str, Any]:
     """:data:`PANORAMA_CONTROLLER_OPTIONS` for a model of image observations, else none (the
     controller's defaults: the plain reach threshold)."""
     return dict(PANORAMA_CONTROLLER_OPTIONS) if _reads_images(model) else {}
+
+
+@dataclass(frozen=True)
+class Leg:
+    """The stretch of its route an agent is on: from the node it left last to its current target.
+
+    Attributes:
+        source: buffer node id it left, or ``None`` for its own start (or the place it replanned from).
+        target: buffer node id it heads for, or ``None`` for its goal.
+        predicted: the critic's predicted steps from ``source`` to ``target``.
+        started: controller step at which the route holding this leg was planned.
+    """
+
+    source: Optional[int]
+    target: Optional[int]
+    predicted: float
+    started: int
 
 
 class SearchPolicy:
@@ -274,6 +294,8 @@ class SearchPolicy:
         self.agents: List[str] = []
         #: per agent, the node ids of its current route (the planner's problem graph)
         self.routes: Dict[str, List[int]] = {}
+        #: per agent, the problem graph its route lives on, its goal's id there and the step it was planned at
+        self._route_graph: Dict[str, Tuple[ProblemGraph, int, int]] = {}
         self._banned: Dict[str, List[int]] = {}
         #: per agent: the waypoint nodes it failed to reach since its last full plan
         self._failed: Dict[str, List[int]] = {}
@@ -294,6 +316,23 @@ class SearchPolicy:
         if self.controller is None:
             raise ValueError("no plan yet: call predict() first")
         return self.controller.plans[agent].waypoints
+
+    def leg(self, agent: str) -> Optional[Leg]:
+        """The edge of its planned route ``agent`` is on now (``None`` without a planned route)."""
+        if self.controller is None or self.planner is None or agent not in self._route_graph:
+            return None
+        route = self.routes.get(agent, [])
+        problem, goal_id, started = self._route_graph[agent]
+        k = self.controller.index[agent]
+        target = route[k] if k < len(route) else goal_id
+        source = route[k - 1] if k > 0 else None
+        n = problem.n_buffer
+        predicted = math.nan if source is None else float(problem.D[source, target])
+
+        def buffer_id(i: Optional[int]) -> Optional[int]:
+            return None if i is None or i >= n else int(i)
+
+        return Leg(buffer_id(source), buffer_id(target), predicted, started)
 
     # ------------------------------------------------------------------ acting
     def predict(
@@ -357,6 +396,8 @@ class SearchPolicy:
                 shifted = None if p.depart_times is None else [d + t if d > 0 else 0 for d in p.depart_times]
                 self.controller.set_plan(a, AgentPlan(p.waypoints, p.goal, shifted, p.starts_at_first))
                 self.routes[a] = list(plan.nodes[i])
+                assert plan.problem is not None  # a solved plan keeps its problem graph
+                self._route_graph[a] = (plan.problem, plan.problem.goal_ids[i], t)
                 self._banned[a] = []
                 self._failed[a] = []
         self.replan_time += time.perf_counter() - t0
@@ -406,6 +447,8 @@ class SearchPolicy:
             plans = plan.agent_plans(names, hold=self.hold) if plan.solved else direct_plans(goal_arr, names)
             self.routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else []
                            for i, a in enumerate(names)}
+            if plan.solved and plan.problem is not None:
+                self._route_graph = {a: (plan.problem, plan.problem.goal_ids[i], 0) for i, a in enumerate(names)}
             self._banned = {a: [] for a in names}
             self._failed = {a: [] for a in names}
         self.planning_time = time.perf_counter() - t0
@@ -441,13 +484,18 @@ class SearchPolicy:
         if sub.solved:
             new = sub.agent_plans([agent], hold="waits")[agent]
             self.routes[agent] = list(sub.nodes[0])
+            assert sub.problem is not None  # a solved plan keeps its problem graph
+            self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
         else:  # no other way on the graph: give the waypoint up
             new = AgentPlan(current.waypoints[k + 1:], current.goal)
             self.routes[agent] = route[k + 1:]
+            if agent in self._route_graph:  # the rest of the route, from here
+                problem, goal_id, _ = self._route_graph[agent]
+                self._route_graph[agent] = (problem, goal_id, self.controller.t)
         self.replan_time += time.perf_counter() - t1
         return new
 
 
-__all__ = ["DistanceFn", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_REACH_THRESHOLD", "PolicyFn", "REACH_THRESHOLD",
-           "SearchPolicy", "buffer_observations", "default_controller_options", "default_reach_threshold",
-           "distance_fn", "env_observations", "policy_fn"]
+__all__ = ["DistanceFn", "Leg", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_REACH_THRESHOLD", "PolicyFn",
+           "REACH_THRESHOLD", "SearchPolicy", "buffer_observations", "default_controller_options",
+           "default_reach_threshold", "distance_fn", "env_observations", "policy_fn"]

@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
+    from baselines.anatomy import failure_records
     from baselines.evaluation import (
         VALIDATION_SEED_OFFSET,
         EvaluationSetup,
@@ -192,13 +193,16 @@ def run(args: argparse.Namespace) -> int:
             {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
              "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
              "table": sel.table}, indent=1))
+    failures: list = []
     rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                     max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                    c_max_by_agents=chosen, ray=args.ray)
+                    c_max_by_agents=chosen, ray=args.ray,
+                    on_run=lambda row, _prob, ex: failures.extend(failure_records(row, ex.failures)))
     agg = aggregate(rows)
     write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
     (out / "table.json").write_text(json.dumps(agg, indent=1))
+    anatomy = write_anatomy(rows, failures, out, title=args.env)
     names = [m.name for m in methods]
     table = markdown_table(agg, names)
     wall = time.perf_counter() - t0
@@ -234,9 +238,32 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(agg))
     else:
         print(header + table)
-        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}"
+        print("\nWhy agents did not arrive (failed agents per reason):\n\n" + anatomy)
+        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}, "
+              f"{out / 'failures.csv'}, {out / 'anatomy.md'}, {out / 'anatomy.png'}"
               + (f", {out / 'figure.png'}" if args.figure else "") + (f", {out / 'run.gif'}" if args.video else ""))
     return 0
+
+
+def write_anatomy(rows, failures, out, title: str = "") -> str:
+    """Write the failure anatomy of an evaluation into ``out``: ``failures.csv`` (one row per agent
+    that did not arrive), ``anatomy.csv`` / ``anatomy.md`` (reasons per cell) and ``anatomy.png``
+    (stacked bars); returns the Markdown table."""
+    from baselines.anatomy import AgentFailure, anatomy_figure, anatomy_table, failure_summary
+    from baselines.evaluation import write_csv
+
+    if failures:
+        write_csv(failures, out / "failures.csv")
+    else:  # a header alone says that every agent arrived
+        fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
+        (out / "failures.csv").write_text(",".join(fields) + "\n")
+    summary = failure_summary(rows)
+    write_csv(summary, out / "anatomy.csv")
+    table = anatomy_table(summary)
+    (out / "anatomy.md").write_text(f"{title}: why agents did not arrive (failed agents per reason, share of the "
+                                    "cell's failed agents)\n\n" + table + "\n")
+    anatomy_figure(summary, out / "anatomy.png", title=title)
+    return table
 
 
 def _run_paper(args: argparse.Namespace) -> int:
