@@ -425,14 +425,15 @@ def problem_edge_mask(D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
 
 def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
                        c_max: float, exclude: Optional[np.ndarray] = None,
-                       relax: bool = True) -> Tuple[np.ndarray, float]:
+                       relax: bool = True, exclude_edges: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
     """Relax the cost cut-off around agents without a path until every goal is reachable (edits ``keep``).
 
     For an agent without a path, the edges leaving the region its start reaches (and the edges
     entering the region that reaches its goal) are admitted up to twice the cut-off, then four
     times, ...; the rest of the graph keeps ``c_max``. ``exclude`` lists buffer nodes that
-    never gain an edge. Returns ``(connected, c)``: which agents have a path, and the largest
-    cut-off used (``c_max`` itself when nothing was relaxed, or when ``relax`` is false).
+    never gain an edge, ``exclude_edges`` (``(E, 2)`` node pairs) edges never admitted.
+    Returns ``(connected, c)``: which agents have a path, and the largest cut-off used
+    (``c_max`` itself when nothing was relaxed, or when ``relax`` is false).
     """
     n = n_buffer
     k = (D.shape[0] - n) // 2
@@ -449,6 +450,8 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
     if exclude is not None and len(exclude):
         short[exclude, :] = False
         short[:, exclude] = False
+    if exclude_edges is not None and len(exclude_edges):
+        short[exclude_edges[:, 0], exclude_edges[:, 1]] = False
     c_top = float(C[short].max()) if short.any() else 0.0
     while True:
         g = sparse.csr_matrix(keep)
@@ -467,23 +470,29 @@ def build_problem_graph(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
     starts: np.ndarray, goals: np.ndarray, *, d_max: float, c_max: float, endpoint_edges: int = 3,
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
+    exclude_edges: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
     The one pipeline from critic matrices to the graph a problem is searched on:
     :func:`attach_endpoints`, :func:`problem_edge_mask`, then (with ``relax_cost``)
     :func:`relax_cost_locally`. ``exclude`` lists buffer nodes (``0..N-1``) the graph must not
-    use (e.g. a waypoint an agent failed to reach).
+    use (e.g. a waypoint an agent failed to reach), ``exclude_edges`` (``(E, 2)`` pairs of buffer
+    node ids) edges it must not use (e.g. edges agents failed to traverse).
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
     if len(ex) and (ex.min() < 0 or ex.max() >= n):
         raise ValueError(f"exclude must hold buffer node ids in [0, {n}), got {ex.tolist()}")
+    ee = np.asarray(np.zeros((0, 2)) if exclude_edges is None else exclude_edges, dtype=np.int64).reshape(-1, 2)
+    if len(ee) and (ee.min() < 0 or ee.max() >= n):
+        raise ValueError(f"exclude_edges must hold pairs of buffer node ids in [0, {n}), got {ee.tolist()}")
     D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals)
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False
     keep[:, ex] = False
-    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost)
+    keep[ee[:, 0], ee[:, 1]] = False
+    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee)
     graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 

@@ -263,15 +263,17 @@ class BufferPlanner:
         D, C = pairwise(obs, obs)
         return cls(obs, D, C, pairwise, **kwargs)
 
-    def with_options(self, **kwargs) -> "BufferPlanner":
-        """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
-        opts: Dict[str, Any] = dict(
+    def options(self) -> Dict[str, Any]:
+        """The planner's options (its keyword arguments besides the nodes, matrices and critic)."""
+        return dict(
             d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
-        opts.update(kwargs)
-        return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **opts)
+
+    def with_options(self, **kwargs) -> "BufferPlanner":
+        """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
+        return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **{**self.options(), **kwargs})
 
     # ------------------------------------------------------------------ problem graph
     def _check_endpoints(self, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -285,18 +287,18 @@ class BufferPlanner:
                 raise ValueError(f"{name} contain NaN or infinite values")
         return starts, goals
 
-    def problem_graph(self, starts: np.ndarray, goals: np.ndarray,
-                      exclude: Optional[Sequence[int]] = None) -> ProblemGraph:
+    def problem_graph(self, starts: np.ndarray, goals: np.ndarray, exclude: Optional[Sequence[int]] = None,
+                      exclude_edges: Optional[np.ndarray] = None) -> ProblemGraph:
         """The graph a problem is searched on: buffer nodes plus the agents' start and goal
         observations, pruned with this planner's cut-offs (see
         :func:`~agents.search.graph.build_problem_graph`)."""
         starts, goals = self._check_endpoints(starts, goals)
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
-                                   relax_cost=self.relax_cost, exclude=exclude)
+                                   relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
-             exclude: Optional[Sequence[int]] = None) -> MultiAgentPlan:
+             exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None) -> MultiAgentPlan:
         """Plan for agents starting at observations ``starts[i]`` and going to ``goals[i]``.
 
         ``budget`` (optional) bounds each agent's total predicted cost: every agent's route is
@@ -306,10 +308,11 @@ class BufferPlanner:
         the nodes of those routes.
 
         ``exclude`` (optional) lists buffer nodes (ids ``0..N-1``) the plan must not use, e.g.
-        a waypoint an agent failed to reach when it replans.
+        a waypoint an agent failed to reach when it replans; ``exclude_edges`` (optional, ``(E, 2)``)
+        pairs of buffer nodes whose edge the plan must not use, e.g. edges agents failed to traverse.
         """
         t0 = time.perf_counter()
-        problem = self.problem_graph(starts, goals, exclude)
+        problem = self.problem_graph(starts, goals, exclude, exclude_edges)
         k = problem.n_agents
         s_ids, g_ids = problem.start_ids, problem.goal_ids
         D, C, c_max, graph = problem.D, problem.C, problem.c_max, problem.graph

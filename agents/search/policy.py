@@ -25,16 +25,19 @@ are only called through ``predict``, ``distance`` and ``pairwise``.
 from __future__ import annotations
 
 import inspect
+import json
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
-from .graph import ProblemGraph
+from .graph import NodePairwise, ProblemGraph
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+from .repair import EdgeMemory
 
 #: ``policy(obs[B, ...], goal[B, ...]) -> actions[B, 2]``
 PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -126,6 +129,14 @@ def default_controller_options(model: Any) -> Dict[str, Any]:
     return dict(PANORAMA_CONTROLLER_OPTIONS) if _reads_images(model) else {}
 
 
+def _option_names(cls: type) -> Tuple[set, set]:
+    """The keyword options of :class:`BufferPlanner` and of the policy class ``cls``."""
+    planner = set(inspect.signature(BufferPlanner.__init__).parameters) - {"self", "observations", "D", "C",
+                                                                          "pairwise"}
+    policy = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}  # type: ignore
+    return planner, policy
+
+
 @dataclass(frozen=True)
 class Leg:
     """The stretch of its route an agent is on: from the node it left last to its current target.
@@ -166,7 +177,10 @@ class SearchPolicy:
             and the nodes within ``ban_radius`` predicted steps of it (a buffer graph has many
             nodes at almost the same place, and a critic that misjudged one edge misjudges their
             edges too); if that ban cuts every route (the only doorway), it bans only the
-            waypoints it failed to reach; if there is still none, it gives the waypoint up.
+            waypoints it failed to reach; if there is still none, it localises: it plans from
+            where it stands on the whole graph less the edges it failed on (its start is attached
+            to the nodes the critic puts nearest); only if that fails too it gives the waypoint up.
+            The edge it failed on is recorded in ``memory``.
         ban_radius: see ``replan_when_stuck``.
         seed: seed of the controller's escape actions (each episode starts from it).
         deterministic: drive with the deterministic policy (default).
@@ -175,6 +189,10 @@ class SearchPolicy:
             will not approach a goal beside furniture); see :class:`WaypointController`.
         controller_kwargs: more options of :class:`WaypointController` (``stuck_window``,
             ``escape_steps``, ...), over :func:`default_controller_options` of the judging model.
+        memory: the :class:`~agents.search.repair.EdgeMemory` of the graph (default: a new, empty
+            one): every plan leaves out the edges it removed, and it learns from every episode
+            unless frozen (``memory.frozen = True``; an evaluation learns on validation problems
+            and freezes it for the test problems). :meth:`save` keeps it with the graph.
     """
 
     def __init__(
@@ -193,6 +211,7 @@ class SearchPolicy:
         deterministic: bool = True,
         fallback_model: Any = None,
         controller_kwargs: Optional[Dict[str, Any]] = None,
+        memory: Optional[EdgeMemory] = None,
     ) -> None:
         if hold not in ("all", "waits"):
             raise ValueError(f"hold must be 'all' or 'waits', got {hold!r}")
@@ -225,6 +244,12 @@ class SearchPolicy:
         self._policy = policy_fn(policy_model, deterministic=self.deterministic)
         self._fallback = None if fallback_model is None else policy_fn(fallback_model, deterministic=self.deterministic)
         self._distance = distance_fn(self.distance_model)
+        if memory is not None and planner is not None and memory.n_nodes != len(planner.observations):
+            raise ValueError(f"the edge memory is of a graph of {memory.n_nodes} nodes, the planner's has "
+                             f"{len(planner.observations)}")
+        n_nodes = len(planner.observations) if planner is not None else 1
+        #: edges agents failed to traverse, learned over episodes (see :mod:`agents.search.repair`)
+        self.memory = memory if memory is not None else EdgeMemory(n_nodes)
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -256,9 +281,7 @@ class SearchPolicy:
                 ``proximity_radius``, ``suboptimality``, ``time_limit``, ...) and
                 :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
         """
-        planner_names = set(inspect.signature(BufferPlanner.__init__).parameters) - {"self", "observations", "D",
-                                                                                      "C", "pairwise"}
-        policy_names = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}
+        planner_names, policy_names = _option_names(cls)
         unknown = set(options) - planner_names - policy_names
         if unknown:
             raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner_names)}; "
@@ -281,6 +304,48 @@ class SearchPolicy:
         kwargs.setdefault("seed", seed)
         return cls(planner, driver if driver is not None else critic, **kwargs)
 
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: Union[str, Path]) -> Path:
+        """Write the graph (node observations, ``D``, ``C``, the planner's options) and what it learned
+        (:attr:`memory`) to ``path`` (``.npz``); :meth:`load` reads it back with the models."""
+        if self.planner is None:
+            raise ValueError("this SearchPolicy has no planner, hence no graph to save")
+        p = self.planner
+        path = Path(path)
+        arrays: Dict[str, Any] = dict(observations=p.observations, D=p.D, C=p.C,
+                                      planner_options=np.array(json.dumps(p.options())), **self.memory.arrays())
+        np.savez_compressed(path, **arrays)
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    @classmethod
+    def load(cls, path: Union[str, Path], critic: Any, driver: Any = None, *, aggregate: str = "max",
+             **options: Any) -> "SearchPolicy":
+        """A policy over the graph :meth:`save` wrote, with its edge memory.
+
+        ``critic`` attaches start and goal observations to the graph (the model whose critics made
+        ``D`` and ``C``), ``driver`` drives (default: the critic); ``options`` override saved planner
+        options (``c_max``, ...) and set :class:`SearchPolicy` options, as in :meth:`from_models`.
+        """
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                obs, D, C = np.asarray(f["observations"]), np.asarray(f["D"]), np.asarray(f["C"])
+                saved = json.loads(str(f["planner_options"]))
+                memory = EdgeMemory.from_arrays(f)
+        except (OSError, KeyError, ValueError, EOFError) as e:
+            raise ValueError(f"{path} is not a saved SearchPolicy graph: {e}") from None
+        planner_names, policy_names = _option_names(cls)
+        unknown = set(options) - planner_names - policy_names
+        if unknown:
+            raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner_names)}; "
+                            f"policy options: {sorted(policy_names)}")
+        if memory.n_nodes != len(obs):
+            raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
+        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate),
+                                **{**saved, **{k: v for k, v in options.items() if k in planner_names}})
+        kwargs = {k: v for k, v in options.items() if k in policy_names}
+        kwargs.setdefault("memory", memory)
+        return cls(planner, driver if driver is not None else critic, **kwargs)
+
     # ------------------------------------------------------------------ episode state
     def reset(self, seed: Optional[int] = None) -> None:
         """Forget the current plan: the next :meth:`predict` plans anew (``seed`` replaces the
@@ -297,6 +362,10 @@ class SearchPolicy:
         #: per agent, the problem graph its route lives on, its goal's id there and the step it was planned at
         self._route_graph: Dict[str, Tuple[ProblemGraph, int, int]] = {}
         self._banned: Dict[str, List[int]] = {}
+        #: per agent: the buffer edges it failed on this episode (left out of its replans)
+        self._failed_edges: Dict[str, List[Tuple[int, int]]] = {}
+        #: per agent: the waypoint index last seen, and whether its route changed since (for successes)
+        self._seen_index: Dict[str, int] = {}
         #: per agent: the waypoint nodes it failed to reach since its last full plan
         self._failed: Dict[str, List[int]] = {}
         self._goals: Dict[str, np.ndarray] = {}
@@ -372,6 +441,7 @@ class SearchPolicy:
         self._last_obs.update(current)
         self._last_names = set(current)
         actions = self.controller.act(current)
+        self._record_progress()
         if single:
             act = actions["agent_0"]
             return (act[None] if np.ndim(observation["observation"]) > len(self._shape()) else act), None
@@ -389,7 +459,8 @@ class SearchPolicy:
             raise ValueError(f"cannot replan {unknown or names}: agents seen are {sorted(self._last_obs)}")
         t0 = time.perf_counter()
         plan = self.planner.plan(np.stack([self._last_obs[a] for a in names]),
-                                 np.stack([self._goals[a] for a in names]), budget=self.budget)
+                                 np.stack([self._goals[a] for a in names]), budget=self.budget,
+                                 exclude_edges=self.memory.removed())
         if plan.solved:
             t = self.controller.t
             for i, (a, p) in enumerate(plan.agent_plans(names, hold=self.hold).items()):
@@ -400,6 +471,7 @@ class SearchPolicy:
                 self._route_graph[a] = (plan.problem, plan.problem.goal_ids[i], t)
                 self._banned[a] = []
                 self._failed[a] = []
+                self._seen_index[a] = self.controller.index[a]
         self.replan_time += time.perf_counter() - t0
         return plan
 
@@ -442,7 +514,7 @@ class SearchPolicy:
         if self.planner is None:
             plans = direct_plans(goal_arr, names)
         else:
-            plan = self.planner.plan(starts, goal_arr, budget=self.budget)
+            plan = self.planner.plan(starts, goal_arr, budget=self.budget, exclude_edges=self.memory.removed())
             self.current_plan = plan
             plans = plan.agent_plans(names, hold=self.hold) if plan.solved else direct_plans(goal_arr, names)
             self.routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else []
@@ -451,6 +523,8 @@ class SearchPolicy:
                 self._route_graph = {a: (plan.problem, plan.problem.goal_ids[i], 0) for i, a in enumerate(names)}
             self._banned = {a: [] for a in names}
             self._failed = {a: [] for a in names}
+            self._failed_edges = {a: [] for a in names}
+            self._seen_index = {a: 0 for a in names}
         self.planning_time = time.perf_counter() - t0
         self.agents = names
         self._goals = dict(goals)
@@ -460,6 +534,24 @@ class SearchPolicy:
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
                                              **self.controller_kwargs)
 
+    def _record_progress(self) -> None:
+        """Record the buffer edges agents got through since the last step in :attr:`memory`."""
+        assert self.controller is not None
+        for a, seen in self._seen_index.items():
+            now = self.controller.index.get(a, seen)
+            route = self.routes.get(a, [])
+            n = len(self.planner.observations) if self.planner is not None else 0
+            for q in range(max(seen, 1), min(now, len(route))):  # targets seen .. now - 1 were reached
+                u, v = route[q - 1], route[q]
+                if u < n and v < n and u != v:
+                    self.memory.record_success(u, v)
+            self._seen_index[a] = now
+
+    def _exclude_edges(self, agent: str) -> np.ndarray:
+        """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
+        own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
+        return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
+
     def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
         """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
         assert self.planner is not None and self.controller is not None
@@ -468,6 +560,10 @@ class SearchPolicy:
         n_nodes = len(p.observations)
         k = self.controller.index[agent]
         route = self.routes[agent]
+        leg = self.leg(agent)
+        if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
+            self._failed_edges.setdefault(agent, []).append((leg.source, leg.target))
+            self.memory.record_failure(leg.source, leg.target)
         # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
         # nodes right by it
         f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
@@ -475,12 +571,18 @@ class SearchPolicy:
             near = np.minimum(p.D[f], p.D[:, f]) < self.ban_radius
             self._failed[agent].append(f)
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
-        sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=self._banned[agent])
+        goal = self._goals[agent][None]
+        edges = self._exclude_edges(agent)
+        sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent], exclude_edges=edges)
         if not sub.solved and self._failed[agent]:
             # banning the neighbourhood cut every route (e.g. the only doorway): ban only the
             # waypoints that were failed, so the agent tries the passage by other nodes
             self._banned[agent] = list(self._failed[agent])
-            sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=self._banned[agent])
+            sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent], exclude_edges=edges)
+        if not sub.solved and self._banned[agent]:
+            # localise: a new route from where it stands, over any node, less the failed edges
+            self._banned[agent] = []
+            sub = p.plan(ob[None], goal, budget=self.budget, exclude_edges=edges)
         if sub.solved:
             new = sub.agent_plans([agent], hold="waits")[agent]
             self.routes[agent] = list(sub.nodes[0])
@@ -492,6 +594,7 @@ class SearchPolicy:
             if agent in self._route_graph:  # the rest of the route, from here
                 problem, goal_id, _ = self._route_graph[agent]
                 self._route_graph[agent] = (problem, goal_id, self.controller.t)
+        self._seen_index[agent] = 0
         self.replan_time += time.perf_counter() - t1
         return new
 

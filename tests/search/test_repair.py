@@ -1,0 +1,180 @@
+"""A graph that repairs itself: the edge memory, failed edges left out of later plans, localisation of a
+lost agent, and save/load of the repaired graph (stand-in critic, no env, no torch)."""
+import numpy as np
+import pytest
+
+from agents.search import BufferPlanner, SearchPolicy
+from agents.search.repair import EdgeMemory
+
+
+class WallWorld:
+    """Observations are points of a 10 x 10 room cut by a wall at x = 5 with one narrow door at (5, 5)
+    that a straight line only passes if it starts or ends in it; the stand-in critic measures straight
+    lines that do not cross the wall (100 steps if they do), its policy heads straight for the goal."""
+
+    def _seg(self, a, b):
+        a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
+        length = np.linalg.norm(b - a, axis=-1)
+        dx = b[..., 0] - a[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (5.0 - a[..., 0]) / dx
+        in_door = (np.linalg.norm(a - 5.0, axis=-1) < 0.3) | (np.linalg.norm(b - 5.0, axis=-1) < 0.3)
+        crosses = (dx != 0) & (s > 0) & (s < 1) & ~in_door
+        return np.where(crosses, 100.0, np.maximum(length, 1.0)), np.zeros_like(length)
+
+    def pairwise(self, a, b, aggregate="max"):
+        return self._seg(np.asarray(a)[:, None, :], np.asarray(b)[None, :, :])
+
+    def distance(self, obs, goal, aggregate="max"):
+        return self._seg(obs, goal)[0]
+
+    def predict(self, batch, deterministic=True):
+        d = np.asarray(batch["desired_goal"]) - np.asarray(batch["observation"])
+        return (d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1.0)).astype(np.float32), None
+
+
+def corridor_nodes():
+    """Nodes on a 2-unit grid either side of the wall, and one node in the door."""
+    xs = [1.0, 3.0, 4.5]
+    left = [(x, y) for x in xs for y in (1.0, 3.0, 5.0, 7.0, 9.0)]
+    right = [(10.0 - x, y) for x, y in left]
+    return np.array(left + [(5.0, 5.0)] + right, dtype=np.float32)
+
+
+@pytest.fixture
+def world():
+    return WallWorld()
+
+
+@pytest.fixture
+def planner(world):
+    nodes = corridor_nodes()
+    D, C = world.pairwise(nodes, nodes)
+    return BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+
+
+START = np.array([1.0, 1.0], np.float32)
+GOAL = np.array([9.0, 9.0], np.float32)
+DOOR = 15  # the node in the door
+
+
+def drive_until_stuck(policy, target_edge):
+    """Feed the policy the observations of its waypoints until it heads along ``target_edge``, then keep it
+    standing at the edge's source (a stuck agent) until it replans; returns the route it was on."""
+    obs = {"observation": START, "desired_goal": GOAL}
+    policy.predict(obs)
+    route = list(policy.routes["agent_0"])
+    nodes = policy.planner.observations
+    for _ in range(100):
+        leg = policy.leg("agent_0")
+        here = nodes[leg.source] if leg.source is not None else START
+        if (leg.source, leg.target) == target_edge or policy.stats.replans:
+            break
+        policy.predict({"observation": nodes[leg.target], "desired_goal": GOAL})
+    replans = policy.stats.replans
+    for _ in range(200):
+        if policy.stats.replans > replans:
+            return route
+        policy.predict({"observation": here, "desired_goal": GOAL})
+    raise AssertionError("the agent never replanned")
+
+
+def first_edge_into(route, node):
+    i = route.index(node)
+    return route[i - 1], route[i]
+
+
+def edges_of(route):
+    return set(zip(route[:-1], route[1:]))
+
+
+def test_edge_memory_counts_removes_and_round_trips(tmp_path):
+    m = EdgeMemory(10, limit=2)
+    m.record_failure(1, 2)
+    assert not m.is_removed(1, 2) and len(m) == 0  # one failure is below the limit
+    m.record_failure(1, 2)
+    assert m.is_removed(1, 2) and m.removed().tolist() == [[1, 2]]
+    assert not m.is_removed(2, 1)  # directed
+    m.record_success(1, 2)
+    m.record_success(1, 2)
+    assert not m.is_removed(1, 2)  # as many successes as failures: kept
+    m.record_failure(3, 4)
+    m.frozen = True
+    m.record_failure(3, 4)
+    m.record_success(5, 6)
+    assert m.failures[(3, 4)] == 1 and (5, 6) not in m.successes  # frozen: nothing more is learned
+    m.save(tmp_path / "m.npz")
+    back = EdgeMemory.load(tmp_path / "m.npz")
+    assert back.failures == m.failures and back.successes == m.successes and back.limit == 2
+    with pytest.raises(ValueError, match="buffer nodes"):
+        m.record_failure(3, 10)
+    np.savez(tmp_path / "bad.npz", memory_meta=np.array([10, 1]), memory_failures=np.array([[1, 2, -1]]),
+             memory_successes=np.zeros((0, 3)))
+    with pytest.raises(ValueError, match="negative"):
+        EdgeMemory.load(tmp_path / "bad.npz")
+    with pytest.raises(ValueError, match="not a saved edge memory"):
+        EdgeMemory.from_arrays({})
+
+
+def test_a_failed_edge_is_recorded_and_not_planned_again(world, planner):
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    obs = {"observation": START, "desired_goal": GOAL}
+    policy.predict(obs)
+    first = list(policy.routes["agent_0"])
+    assert DOOR in first  # the only way through the wall
+    bad = first_edge_into(first, DOOR)
+    drive_until_stuck(policy, bad)
+    assert policy.memory.failures == {bad: 1} and policy.memory.is_removed(*bad)
+    assert bad not in edges_of(policy.routes["agent_0"])  # the repaired plan leaves it out
+    # the next episode plans without it from the start, and got-through edges count as successes
+    assert policy.memory.successes and all(not policy.memory.is_removed(*e) for e in policy.memory.successes)
+    policy.reset()
+    policy.predict(obs)
+    again = policy.routes["agent_0"]
+    assert DOOR in again and bad not in edges_of(again)
+    # a frozen memory still removes what it learned, and learns nothing more
+    policy.memory.frozen = True
+    policy.reset()
+    route = drive_until_stuck(policy, first_edge_into(list(again), DOOR))
+    assert route == list(again) and policy.memory.failures == {bad: 1}
+
+
+def test_a_lost_agent_localises_and_replans_from_where_it_stands(world, planner):
+    """Stuck in front of the door, banning the door's neighbourhood (and then the door) cuts every route:
+    the agent plans again over the whole graph from where it stands instead of giving the door up."""
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy.predict({"observation": START, "desired_goal": GOAL})
+    route = list(policy.routes["agent_0"])
+    before_door = first_edge_into(route, DOOR)
+    drive_until_stuck(policy, before_door)
+    new = policy.routes["agent_0"]
+    assert policy.stats.replans == 1
+    # a plan from its own position (the route's first node is the attached start) through the door
+    assert new[0] >= len(planner.observations) and DOOR in new
+    np.testing.assert_array_equal(policy.waypoints("agent_0")[0], planner.observations[before_door[0]])
+    assert before_door not in edges_of(new)
+
+
+def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_path):
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy.predict({"observation": START, "desired_goal": GOAL})
+    drive_until_stuck(policy, first_edge_into(list(policy.routes["agent_0"]), DOOR))
+    path = policy.save(tmp_path / "graph")
+    assert path.name == "graph.npz" and path.exists()
+    back = SearchPolicy.load(path, world, reach_threshold=1.5, safety_radius=None)
+    assert back.memory.failures == policy.memory.failures and back.memory.successes == policy.memory.successes
+    np.testing.assert_array_equal(back.planner.D, planner.D)
+    assert back.planner.options() == planner.options()
+    policy.reset()
+    obs = {"observation": START, "desired_goal": GOAL}
+    policy.predict(obs)
+    back.predict(obs)
+    assert back.routes["agent_0"] == policy.routes["agent_0"]  # the loaded graph plans around the failed edge
+    assert SearchPolicy.load(path, world, c_max=3.0).planner.c_max == 3.0
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a saved SearchPolicy graph"):
+        SearchPolicy.load(tmp_path / "junk.npz", world)
+    with pytest.raises(TypeError, match="unknown options"):
+        SearchPolicy.load(path, world, colour="red")
+    with pytest.raises(ValueError, match="edge memory is of a graph of 3 nodes"):
+        SearchPolicy(planner, world, memory=EdgeMemory(3))
