@@ -57,7 +57,8 @@ class AgentFailure:
         held_share: share of the last ``window`` steps it stood still for another agent.
         progress: geodesic steps it came closer to its goal over the window.
         escapes: times it was found stuck on the way to its last target.
-        blocker: the agent it waited for or the parked agent beside it (``""`` if none).
+        blocker: the agent it waited for or the parked agent beside it (``"wait"``: its planned departure
+            time; ``""`` if none).
     """
 
     agent: str
@@ -106,7 +107,8 @@ class FailureTracker:
         self.step_length = float(step_length)
         self.touch = float(touch)
         self.window = int(window)
-        #: per step: name -> the agent it stood for (``"wait"`` for a planned wait) or None
+        #: per step: name -> why it stood (``"yield:<agent>"``, ``"wait:<agent>"``, ``"wait"``: its planned
+        #: departure time) or None
         self.holds: List[Dict[str, Optional[str]]] = []
         #: per step: name -> the live agents it touched
         self.contacts: List[Dict[str, List[str]]] = []
@@ -168,7 +170,7 @@ class FailureTracker:
             reason = classify(planned, held_share, progress, self.step_length, w, near)
             f = AgentFailure(a, reason, to_goal=to_goal / self.step_length, held_share=held_share,
                              progress=progress / self.step_length, escapes=int((escapes or {}).get(a, 0)),
-                             blocker=blocker.removeprefix("yield:") if blocker != "wait" else "plan")
+                             blocker=blocker.split(":", 1)[1] if ":" in blocker else blocker)
             leg = (legs or {}).get(a)
             if leg is not None:
                 if leg.source is None:  # its start, or where it replanned from

@@ -83,30 +83,33 @@ class EvaluationWorker:
         self.max_cycles = max_cycles
         self.envs: Dict[int, Any] = {}
 
-    def run(self, task: Tuple[int, Any, Any, int]) -> Tuple[int, Dict[str, Any], Any]:
-        """Run one task ``(index, method, problem, base seed)``; returns ``(index, row, execution)``."""
+    def run(self, task: Tuple[int, Any, Any, int, Any]) -> Tuple[int, Dict[str, Any], Any]:
+        """Run one task ``(index, method, problem, base seed, edge memory or None)``; returns ``(index, row,
+        execution)``."""
         import safe_mapf_envs
         from baselines.evaluation import run_row
 
-        index, method, problem, seed = task
+        index, method, problem, seed, memory = task
         k = problem.n_agents
         if k not in self.envs:
             self.envs[k] = safe_mapf_envs.parallel_env(self.setup.env_id, n_agents=k, max_cycles=self.max_cycles)
-        row, ex = run_row(self.setup, self.envs[k], method, problem, seed)
+        row, ex = run_row(self.setup, self.envs[k], method, problem, seed, memory=memory)
         return index, row, ex
 
 
 def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycles: int,
-               address: Optional[str] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
+               address: Optional[str] = None,
+               memories: Optional[Dict[str, Any]] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
     """Run ``tasks`` (``(method, problem)`` pairs) on Ray workers; yields ``(index, row, execution)``
-    as results arrive (``index``: the task's position)."""
+    as results arrive (``index``: the task's position). ``memories``: frozen edge memories by method
+    name, each run's starting point."""
     ray = init_ray(address)
     payload = ray.put(setup_payload(setup))
     n_workers = max(1, min(len(tasks), int(ray.available_resources().get("CPU", 1))))
     Worker = ray.remote(num_cpus=1)(EvaluationWorker)
     workers = [Worker.remote(payload, max_cycles) for _ in range(n_workers)]
     pool = ray.util.ActorPool(workers)
-    items = [(i, m, p, seed) for i, (m, p) in enumerate(tasks)]
+    items = [(i, m, p, seed, (memories or {}).get(m.name)) for i, (m, p) in enumerate(tasks)]
     # the longest runs first (many agents, far goals, a search to plan), so none is left to run alone at the end
     depth = {"hard": 0, "medium": 1, "easy": 2}
     items.sort(key=lambda t: (-t[2].n_agents, depth.get(t[2].difficulty, 3), not t[1].search, t[0]))

@@ -30,6 +30,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from agents.search.graph import NodePairwise
 from agents.search.planner import BufferPlanner
+from agents.search.repair import EdgeMemory
 
 from .anatomy import failures_field
 from .methods import METHODS, Method, execute
@@ -177,6 +178,8 @@ ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max"
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
+#: :func:`learn_edge_memory` draws its problems with the test seed plus this offset by default
+REPAIR_SEED_OFFSET = 20_000
 #: quantiles of the graph's predicted edge costs that make the default c_max grid
 C_MAX_QUANTILES = (0.25, 0.5, 0.75)
 
@@ -195,11 +198,13 @@ def _methods_for(methods: Sequence[Method], k: int, policy_agents: Optional[Sequ
     return out
 
 
-def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed: int):
+def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed: int,
+            memory: Optional[EdgeMemory] = None):
     """Run ``method`` on ``problem`` in ``env``; returns ``(row, execution)``. The run is seeded with
-    ``seed + problem.index``, wherever it runs."""
+    ``seed + problem.index``, wherever it runs; a search method plans with ``memory`` (its graph's
+    :class:`~agents.search.repair.EdgeMemory`; default: a new one)."""
     ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed + problem.index,
-                 node_positions=setup.states)
+                 node_positions=setup.states, memory=memory)
     row = {
         "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty,
         "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
@@ -224,6 +229,7 @@ def evaluate(
     c_max_by_agents: Optional[Dict[int, float]] = None,
     desc: str = "evaluate",
     ray: Optional[str] = None,
+    memories: Optional[Dict[str, EdgeMemory]] = None,
 ) -> List[Dict[str, Any]]:
     """Run every method on the same problems; one row per (method, agents, difficulty, problem).
 
@@ -236,6 +242,10 @@ def evaluate(
     ``ray`` runs the runs as Ray tasks (see :mod:`baselines.distributed`): ``"local"`` on this
     machine's cores, ``"auto"`` on the cluster this machine belongs to, or a cluster address.
     The rows are those of the serial evaluation, in the same order (timing fields aside).
+
+    ``memories`` gives search methods (by name) the edge memory their graph learned before
+    (:func:`learn_edge_memory`); each run starts from a copy of it, frozen, so that no run learns
+    from the test problems and the rows do not depend on the order of the runs.
     """
     import safe_mapf_envs
 
@@ -248,6 +258,7 @@ def evaluate(
     for k, d in cells:
         problems = make_problems(setup, d, k, n_problems, seed=seed)
         tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
+    frozen = {name: _frozen_copy(m) for name, m in (memories or {}).items()}
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -268,7 +279,7 @@ def evaluate(
                     env.close()
                 env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=prob.n_agents, max_cycles=max_cycles)
                 cell = (prob.n_agents, prob.difficulty)
-            row, ex = run_row(setup, env, m, prob, seed)
+            row, ex = run_row(setup, env, m, prob, seed, memory=_frozen_copy(frozen.get(m.name)))
             done(row, prob, ex)
             if bar is not None:
                 bar.update(1)
@@ -279,7 +290,7 @@ def evaluate(
         from .distributed import run_on_ray
 
         pending: Dict[int, Any] = {}
-        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, address=ray):
+        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, address=ray, memories=frozen):
             pending[i] = (row, ex)
             while len(rows) in pending:  # hand rows on in order
                 j = len(rows)
@@ -290,6 +301,57 @@ def evaluate(
     if bar is not None:
         bar.close()
     return rows
+
+
+def _frozen_copy(memory: Optional[EdgeMemory]) -> Optional[EdgeMemory]:
+    """A frozen copy of ``memory`` (``None`` stays ``None``): a run may not change what others start from."""
+    if memory is None:
+        return None
+    out = EdgeMemory(memory.n_nodes, memory.limit)
+    out.update(memory)
+    out.frozen = True
+    return out
+
+
+def learn_edge_memory(
+    setup: EvaluationSetup,
+    methods: Sequence[Method],
+    agent_counts: Sequence[int],
+    difficulties: Sequence[str] = tuple(DIFFICULTIES),
+    n_problems: int = 10,
+    seed: int = REPAIR_SEED_OFFSET,
+    test_seed: Optional[int] = None,
+    limit: int = 1,
+    max_cycles: int = 300,
+    progress: bool = True,
+    policy_agents: Optional[Sequence[int]] = None,
+    c_max_by_agents: Optional[Dict[int, float]] = None,
+    ray: Optional[str] = None,
+) -> Dict[str, EdgeMemory]:
+    """What each search method's graph learns on repair problems: the edges its agents fail on.
+
+    Every search method among ``methods`` runs ``n_problems`` problems per cell drawn with ``seed``
+    (never ``test_seed``: the graph must not learn the test problems); each run starts from an
+    empty :class:`~agents.search.repair.EdgeMemory` and the runs' memories are added up, so the
+    result does not depend on the order of the runs (serial or ``ray``). Returns one frozen memory
+    per method name, with removal at ``limit`` failures.
+    """
+    if test_seed is not None and seed == test_seed:
+        raise ValueError(f"the repair seed must differ from the test seed {test_seed}: a graph that learns "
+                         "on the test problems would overstate the method")
+    search = [m for m in methods if m.search]
+    memories = {m.name: EdgeMemory(len(setup.observations), limit) for m in search}
+
+    def learn(row, _problem, ex) -> None:
+        memories[row["method"]].update(ex.extra["memory"])
+
+    if search:
+        evaluate(setup, search, agent_counts, difficulties, n_problems, seed=seed, max_cycles=max_cycles,
+                 progress=progress, on_run=learn, policy_agents=policy_agents, c_max_by_agents=c_max_by_agents,
+                 desc="learn repairs", ray=ray)
+    for m in memories.values():
+        m.frozen = True
+    return memories
 
 
 def c_max_grid(setup: EvaluationSetup, quantiles: Sequence[float] = C_MAX_QUANTILES) -> List[float]:
@@ -460,6 +522,6 @@ def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
         w.writerows(rows)
 
 
-__all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "ROW_FIELDS",
-           "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "make_problems", "markdown_table",
-           "select_c_max", "write_csv"]
+__all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "REPAIR_SEED_OFFSET",
+           "ROW_FIELDS", "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "learn_edge_memory",
+           "make_problems", "markdown_table", "select_c_max", "write_csv"]

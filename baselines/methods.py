@@ -26,6 +26,7 @@ import numpy as np
 
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy, distance_fn, policy_fn
+from agents.search.repair import EdgeMemory
 
 from .anatomy import AgentFailure, FailureTracker
 
@@ -41,8 +42,9 @@ class Method:
         search: plan waypoints with CBS on the buffer graph (``False``: straight to the goal).
         c_max: cost cut-off of the graph's edges (``inf``: distance pruning only).
         budget: optional per-agent bound on the total predicted cost of a route.
-        hold: where an early agent waits for its planned departure time: ``"all"`` waypoints
-            or only where the plan ``"waits"``.
+        hold: how the agents keep to the plan: in its ``"order"`` at shared places, or on its
+            clock (an early agent waits for its planned departure time at ``"all"`` waypoints or
+            only where the plan ``"waits"``); see :class:`~agents.search.policy.SearchPolicy`.
         fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
             leg once its own policy is stuck there (see
             :class:`~agents.search.controller.WaypointController`).
@@ -54,7 +56,7 @@ class Method:
     search: bool
     c_max: float = math.inf
     budget: Optional[float] = None
-    hold: str = "waits"
+    hold: str = "order"
     fallback: Optional[str] = None
 
     def with_options(self, **kwargs) -> "Method":
@@ -122,6 +124,7 @@ def execute(
     hold: Optional[str] = None,
     ban_radius: float = 3.0,
     node_positions: Optional[np.ndarray] = None,
+    memory: Optional[EdgeMemory] = None,
 ) -> Execution:
     """Run ``method`` from positions ``starts`` to ``goals`` in the parallel env ``env``.
 
@@ -136,6 +139,9 @@ def execute(
     Every agent that does not arrive gets a reason (:attr:`Execution.failures`, see
     :mod:`baselines.anatomy`), read from ground truth after the run; ``node_positions`` (the
     buffer nodes' true positions, for evaluation only) adds the true length of the leg it was on.
+
+    ``memory`` is the search's :class:`~agents.search.repair.EdgeMemory` (default: a new one,
+    returned in ``extra["memory"]`` with what this run taught it).
     """
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -146,7 +152,8 @@ def execute(
         planner_m = planner.with_options(c_max=method.c_max) if planner.c_max != method.c_max else planner
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
-                          seed=seed, fallback_model=models[method.fallback] if method.fallback else None)
+                          seed=seed, fallback_model=models[method.fallback] if method.fallback else None,
+                          memory=memory if method.search else None)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
@@ -182,6 +189,8 @@ def execute(
     stats = policy.stats
     extra.update(yields=stats.yields, waits=stats.waits, escapes=stats.escapes, skips=stats.skips,
                  replans=stats.replans)
+    if method.search:
+        extra["memory"] = policy.memory
     trajectories = np.stack(traj)
     failures: List[AgentFailure] = []
     if not reached.all():

@@ -10,13 +10,19 @@ current waypoint's observation. Rules, all from observations only:
   such a waypoint would otherwise never see it reached;
 - **plan time**: an agent does not leave waypoint ``k`` before the plan's departure time from
   it (so CBS's waits happen in the environment, too);
+- **plan order** (optional, instead of plan time): an agent does not set off for a target before
+  the agents the plan sends through that place earlier have got far enough along their own
+  routes (:mod:`agents.search.dependencies`), however late they are; an agent waits on another
+  for at most ``order_patience`` steps in which that one makes no progress, and never on one that
+  has replanned;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
   first, ties broken by index); the paper states this rule, we implement it;
 - **unstick**: an agent that was free to move but whose observation has hardly changed over
   ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
-  other) takes ``escape_steps`` random actions (more if it gets stuck again); stuck
-  ``skip_after`` times on the way to the same target, it asks ``replan`` for a new plan from
+  other), or (optional) that came no closer to its target for ``progress_patience`` steps (it
+  took one place for another and hovers there), takes ``escape_steps`` random actions (more if
+  it gets stuck again); stuck ``skip_after`` times on the way to the same target, it asks ``replan`` for a new plan from
   where it stands (without one, it gives a waypoint up and heads for the next one). A
   deterministic policy that pushes into a wall would otherwise push there until the episode
   ends;
@@ -54,12 +60,16 @@ class AgentPlan:
             critic. A learned distance from an observation to itself is not zero (on the
             apartments it is 1.2-3 steps, above a reach threshold of 2), and an agent sent
             towards its own position moves away from it and may never come back.
+        after: plan-order dependencies (see :mod:`agents.search.dependencies`).
     """
 
     waypoints: np.ndarray
     goal: np.ndarray
     depart_times: Optional[Sequence[int]] = None
     starts_at_first: bool = False
+    #: target index -> ``(agent, target index)`` pairs that must be reached first (plan order; the
+    #: goal is target ``len(waypoints)``, and an agent that has arrived has reached every target)
+    after: Optional[Dict[int, List[Tuple[str, int]]]] = None
 
 
 @dataclass
@@ -73,6 +83,8 @@ class ControllerStats:
     settled: int = 0
     fallbacks: int = 0
     fallback_steps: int = 0
+    #: times an agent came no closer to its target for ``progress_patience`` steps
+    stalls: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
     #: per agent, why it stood still on the last step: ``"wait"`` (its plan's departure time),
     #: ``"yield:<agent>"`` (another agent with priority was too close) or ``None`` (it moved)
@@ -124,6 +136,12 @@ class WaypointController:
         skip_after: times an agent may be stuck on the way to one target before it replans
             (or, without ``replan``, heads for the next waypoint).
         seed: seed of the escape actions.
+        order_patience: steps an agent waits on a plan-order dependency while the agent it waits
+            on does not progress (no new target reached) before it stops waiting on it.
+        progress_patience: an agent free to move that comes no closer to its target (by the
+            critic, by a quarter step) for this many steps counts as stuck, too (``None``: off): a
+            policy that mistakes one place for another (two panoramas alike) drives or hovers
+            somewhere else and never stops long enough for ``stuck_window`` to see it.
     """
 
     def __init__(
@@ -145,6 +163,8 @@ class WaypointController:
         escape_steps: int = 3,
         skip_after: int = 2,
         seed: Optional[int] = 0,
+        order_patience: int = 40,
+        progress_patience: Optional[int] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -177,6 +197,17 @@ class WaypointController:
         self._at_start = {a: p.starts_at_first and len(p.waypoints) > 0 for a, p in self.plans.items()}
         self._thresholds = {a: self._reach_thresholds(p) for a, p in self.plans.items()}
         self._progress: Dict[str, Tuple[int, float, int]] = {}
+        self.order_patience = int(order_patience)
+        if progress_patience is not None and progress_patience < 1:
+            raise ValueError(f"progress_patience must be >= 1 or None, got {progress_patience!r}")
+        self.progress_patience = progress_patience
+        #: per agent: (target index, closest predicted distance, step it was last approached or held)
+        self._best: Dict[str, Tuple[int, float, int]] = {}
+        #: per agent: target index -> agents (with their target index) to wait for
+        self._after = {a: {q: list(v) for q, v in (p.after or {}).items()} for a, p in self.plans.items()}
+        #: per agent: (target it may not set off for, agent it waits on, since when, that one's index then)
+        self._blocked: Dict[str, Tuple[int, str, int, int]] = {}
+        self._live: set = set(self.plans)
         self.t = 0
         self.stats = ControllerStats()
 
@@ -224,11 +255,34 @@ class WaypointController:
             return 0
         return max(0, self.t - int(plan.depart_times[k - 1]))
 
+    def _waits_on(self, agent: str, q: int) -> Optional[str]:
+        """The agent ``agent`` must wait for before setting off for its target ``q`` (``None``: it may go)."""
+        deps = self._after[agent].get(q)
+        if not deps:
+            return None
+        for b, r in list(deps):
+            if b not in self._live or self.index.get(b, 0) > r:
+                deps.remove((b, r))  # reached (or arrived): satisfied for good
+                continue
+            seen = self._blocked.get(agent)
+            if seen is None or seen[:2] != (q, b) or self.index[b] != seen[3]:
+                self._blocked[agent] = (q, b, self.t, self.index[b])
+            elif self.t - seen[2] >= self.order_patience:  # it does not progress: stop waiting on it
+                deps.remove((b, r))
+                self._blocked.pop(agent, None)
+                continue
+            return b
+        return None
+
     def act(self, observations: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
         """Actions for the live agents, given each agent's current observation (the ``observation`` entry)."""
         live = [a for a in observations if a in self.plans]
         if not live:
             return {}
+        self._live = set(live)
+        waiting: Dict[str, str] = {}
+        #: predicted distance of each agent to its current target
+        to_target: Dict[str, float] = {}
         obs = np.stack([np.asarray(observations[a]) for a in live])
         # advance along waypoints while the current one is reached (several may be close together)
         for _ in range(4):
@@ -239,14 +293,22 @@ class WaypointController:
             for i, a in enumerate(live):
                 plan = self.plans[a]
                 k = self.index[a]
+                to_target[a] = float(d[i])
                 if k >= len(plan.waypoints):
                     continue
                 if d[i] < self._thresholds[a][k] or self._settled(a, k, float(d[i])):
                     if plan.depart_times is not None and self.t < int(plan.depart_times[k]):
                         continue
+                    other = self._waits_on(a, k + 1)
+                    if other is not None:
+                        waiting[a] = other
+                        continue
+                    waiting.pop(a, None)
+                    self._blocked.pop(a, None)
                     self.index[a] = k + 1
                     self._stuck_count[a] = 0
                     self.stats.leg_escapes[a] = 0
+                    to_target.pop(a)
                     if not (k == 0 and self._at_start[a]):
                         self._reached[a] += 1
                     moved = True
@@ -272,6 +334,10 @@ class WaypointController:
                     hold[i] = True
                     reason[i] = "wait"
                     self.stats.waits += 1
+            elif a in waiting:  # at its waypoint, waiting for an agent the plan sends through first
+                hold[i] = True
+                reason[i] = f"wait:{waiting[a]}"
+                self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
             yielders = self._yield_mask(live, obs)
             for i, w in yielders.items():
@@ -280,7 +346,7 @@ class WaypointController:
                 hold[i] = True
         self.stats.holding = {a: reason[i] for i, a in enumerate(live)}
         if self.stuck_window is not None:
-            self._unstick(live, obs, hold, actions)
+            self._unstick(live, obs, hold, actions, to_target)
         actions[hold] = 0.0
         if self.replan is not None and self.replan_lag is not None:
             for i, a in enumerate(live):
@@ -293,26 +359,59 @@ class WaypointController:
 
     def set_plan(self, agent: str, plan: AgentPlan) -> None:
         """Give ``agent`` a new plan from now on (it starts at the plan's first waypoint)."""
-        if agent not in self.plans:
-            raise KeyError(f"unknown agent {agent!r}; agents are {sorted(self.plans)}")
-        self.plans[agent] = plan
-        self.index[agent] = 0
-        self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
-        self._thresholds[agent] = self._reach_thresholds(plan)
-        self._progress.pop(agent, None)
-        self._stuck_count[agent] = 0
-        self.stats.leg_escapes[agent] = 0
+        self.set_plans({agent: plan})
+
+    def set_plans(self, plans: Dict[str, AgentPlan]) -> None:
+        """Give several agents new plans at once (e.g. a joint replan, whose plan-order dependencies
+        refer to each other); each starts at its plan's first waypoint."""
+        unknown = sorted(set(plans) - set(self.plans))
+        if unknown:
+            raise KeyError(f"unknown agents {unknown}; agents are {sorted(self.plans)}")
+        # new routes are not in the old plan's order: nobody waits on them any more
+        for deps in self._after.values():
+            for q in list(deps):
+                deps[q] = [(b, r) for b, r in deps[q] if b not in plans]
+        for agent, plan in plans.items():
+            self.plans[agent] = plan
+            self.index[agent] = 0
+            self._after[agent] = {q: list(v) for q, v in (plan.after or {}).items()}
+            self._blocked.pop(agent, None)
+            self._best.pop(agent, None)
+            self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
+            self._thresholds[agent] = self._reach_thresholds(plan)
+            self._progress.pop(agent, None)
+            self._stuck_count[agent] = 0
+            self.stats.leg_escapes[agent] = 0
 
     def _replan(self, agent: str, obs: np.ndarray) -> None:
         assert self.replan is not None
         self.set_plan(agent, self.replan(agent, obs, self.plans[agent]))
         self.stats.replans += 1
 
-    def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray) -> None:
+    def _no_progress(self, agent: str, d: Optional[float], held: bool) -> bool:
+        """Whether ``agent`` has come no closer (by a quarter step) to its current target for
+        ``progress_patience`` steps in which it was free to move (``False`` when that rule is off)."""
+        if self.progress_patience is None or d is None or not math.isfinite(d):
+            return False
+        k = self.index[agent]
+        best = self._best.get(agent)
+        if best is None or best[0] != k or d < best[1] - 0.25:
+            self._best[agent] = (k, d, self.t)
+        elif held:  # standing still on purpose does not count
+            self._best[agent] = (k, best[1], self.t)
+        elif self.t - best[2] >= self.progress_patience:
+            self._best[agent] = (k, d, self.t)
+            self.stats.stalls += 1
+            return True
+        return False
+
+    def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray,
+                 to_target: Dict[str, float]) -> None:
         """Replace the actions of stuck agents free to move by random ones (edits ``actions``)."""
         scale = 255.0 if obs.dtype == np.uint8 else 1.0
         for i, a in enumerate(live):
             recent = self._recent[a]
+            stalled = self._no_progress(a, to_target.get(a), bool(hold[i]))
             if hold[i]:  # standing still on purpose is not being stuck
                 recent.clear()
                 continue
@@ -322,10 +421,11 @@ class WaypointController:
                 recent.clear()
                 continue
             recent.append(obs[i].astype(np.float32) / scale)
-            if len(recent) < (recent.maxlen or 0):
-                continue
-            if float(np.abs(recent[-1] - recent[0]).mean()) >= self.stuck_tolerance:
-                continue
+            if not stalled:
+                if len(recent) < (recent.maxlen or 0):
+                    continue
+                if float(np.abs(recent[-1] - recent[0]).mean()) >= self.stuck_tolerance:
+                    continue
             recent.clear()
             self.stats.escapes += 1
             self.stats.leg_escapes[a] = self.stats.leg_escapes.get(a, 0) + 1

@@ -35,6 +35,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
+from .dependencies import plan_dependencies, proximity_relation
 from .graph import NodePairwise, ProblemGraph
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
 from .repair import EdgeMemory
@@ -119,8 +120,10 @@ def default_reach_threshold(model: Any) -> float:
 #: controller options for agents of panoramas (see :class:`WaypointController`): a waypoint also
 #: counts as reached below its own predicted distance to itself plus half a step, or once the
 #: agent has hovered within 1.5 steps of the threshold for 6 steps without coming closer. On
-#: Apartment0 (5 agents, easy problems, 20 problems) ours' mean cost fell from 21.5 to 14.7.
-PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6}
+#: Apartment0 (5 agents, easy problems, 20 problems) ours' mean cost fell from 21.5 to 14.7. An
+#: agent that comes no closer to its target for 20 steps counts as stuck (it took the target's
+#: panorama for another place's and hovers there).
+PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6, "progress_patience": 20}
 
 
 def default_controller_options(model: Any) -> Dict[str, Any]:
@@ -167,8 +170,12 @@ class SearchPolicy:
         distance_model: optional model whose ``distance`` replaces the driver's.
         budget: optional bound on each agent's total predicted route cost
             (:meth:`BufferPlanner.plan`).
-        hold: where an agent that is early waits for its planned departure time: ``"waits"``
-            (only where CBS made it wait) or ``"all"`` waypoints.
+        hold: how the agents keep to the plan. ``"order"`` (default): in the plan's order, not on
+            the clock: an agent sets off for a place the plan sends another agent through first
+            only once that one has got far enough (:mod:`agents.search.dependencies`; an agent
+            that is slower than planned delays the others instead of meeting them). ``"waits"``
+            (an early agent waits for its planned departure time where CBS made it wait) or
+            ``"all"`` (at every waypoint): on the clock.
         reach_threshold: a waypoint is reached at a predicted distance below this (steps);
             default :func:`default_reach_threshold` of the model that judges it.
         safety_radius: agents closer than this (predicted steps) yield to each other.
@@ -202,7 +209,7 @@ class SearchPolicy:
         distance_model: Any = None,
         *,
         budget: Optional[float] = None,
-        hold: str = "waits",
+        hold: str = "order",
         reach_threshold: Optional[float] = None,
         safety_radius: Optional[float] = 2.0,
         replan_when_stuck: bool = True,
@@ -213,8 +220,8 @@ class SearchPolicy:
         controller_kwargs: Optional[Dict[str, Any]] = None,
         memory: Optional[EdgeMemory] = None,
     ) -> None:
-        if hold not in ("all", "waits"):
-            raise ValueError(f"hold must be 'all' or 'waits', got {hold!r}")
+        if hold not in ("order", "all", "waits"):
+            raise ValueError(f"hold must be 'order', 'all' or 'waits', got {hold!r}")
         judge = distance_model if distance_model is not None else policy_model
         if reach_threshold is None:
             reach_threshold = default_reach_threshold(judge)
@@ -458,20 +465,20 @@ class SearchPolicy:
         if unknown or not names:
             raise ValueError(f"cannot replan {unknown or names}: agents seen are {sorted(self._last_obs)}")
         t0 = time.perf_counter()
-        plan = self.planner.plan(np.stack([self._last_obs[a] for a in names]),
-                                 np.stack([self._goals[a] for a in names]), budget=self.budget,
-                                 exclude_edges=self.memory.removed())
+        plan = self._plan(np.stack([self._last_obs[a] for a in names]), np.stack([self._goals[a] for a in names]))
         if plan.solved:
             t = self.controller.t
-            for i, (a, p) in enumerate(plan.agent_plans(names, hold=self.hold).items()):
+            new = {}
+            for i, (a, p) in enumerate(self._agent_plans(plan, names).items()):
                 shifted = None if p.depart_times is None else [d + t if d > 0 else 0 for d in p.depart_times]
-                self.controller.set_plan(a, AgentPlan(p.waypoints, p.goal, shifted, p.starts_at_first))
+                new[a] = AgentPlan(p.waypoints, p.goal, shifted, p.starts_at_first, p.after)
                 self.routes[a] = list(plan.nodes[i])
                 assert plan.problem is not None  # a solved plan keeps its problem graph
                 self._route_graph[a] = (plan.problem, plan.problem.goal_ids[i], t)
                 self._banned[a] = []
                 self._failed[a] = []
-                self._seen_index[a] = self.controller.index[a]
+            self.controller.set_plans(new)
+            self._seen_index.update({a: 0 for a in names})
         self.replan_time += time.perf_counter() - t0
         return plan
 
@@ -514,9 +521,9 @@ class SearchPolicy:
         if self.planner is None:
             plans = direct_plans(goal_arr, names)
         else:
-            plan = self.planner.plan(starts, goal_arr, budget=self.budget, exclude_edges=self.memory.removed())
+            plan = self._plan(starts, goal_arr)
             self.current_plan = plan
-            plans = plan.agent_plans(names, hold=self.hold) if plan.solved else direct_plans(goal_arr, names)
+            plans = self._agent_plans(plan, names) if plan.solved else direct_plans(goal_arr, names)
             self.routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else []
                            for i, a in enumerate(names)}
             if plan.solved and plan.problem is not None:
@@ -533,6 +540,31 @@ class SearchPolicy:
                                              reach_threshold=self.reach_threshold, safety_radius=self.safety_radius,
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
                                              **self.controller_kwargs)
+
+    def _plan(self, starts: np.ndarray, goals: np.ndarray) -> MultiAgentPlan:
+        """A joint plan without the edges the memory removed; where that leaves an agent without any
+        route (the removed edges were the only way), with them."""
+        assert self.planner is not None
+        removed = self.memory.removed()
+        plan = self.planner.plan(starts, goals, budget=self.budget, exclude_edges=removed)
+        if len(removed) and plan.status == "infeasible":
+            plan = self.planner.plan(starts, goals, budget=self.budget)
+        return plan
+
+    def _agent_plans(self, plan: MultiAgentPlan, names: List[str]) -> Dict[str, AgentPlan]:
+        """The controller's plans of a solved plan, kept by the clock or in the plan's order (``hold``)."""
+        if self.hold != "order":
+            return plan.agent_plans(names, hold=self.hold)
+        plans = plan.agent_plans(names, hold="waits")
+        radius = self.planner.proximity_radius if self.planner is not None else None
+        problem = plan.problem
+        if radius is None or problem is None or len(names) < 2:
+            return {a: AgentPlan(p.waypoints, p.goal, None, p.starts_at_first) for a, p in plans.items()}
+        close = proximity_relation(problem.D, radius, problem.n_buffer, problem.n_agents)
+        deps = plan_dependencies(plan.nodes, plan.node_arrivals, problem.goal_ids, plan.arrival_times, close)
+        return {a: AgentPlan(p.waypoints, p.goal, None, p.starts_at_first,
+                             after={q: [(names[i], r) for i, r in v] for q, v in deps[j].items()})
+                for j, (a, p) in enumerate(plans.items())}
 
     def _record_progress(self) -> None:
         """Record the buffer edges agents got through since the last step in :attr:`memory`."""
@@ -583,6 +615,12 @@ class SearchPolicy:
             # localise: a new route from where it stands, over any node, less the failed edges
             self._banned[agent] = []
             sub = p.plan(ob[None], goal, budget=self.budget, exclude_edges=edges)
+        if not sub.solved and len(edges):
+            # the failed edges were the only way on: try them again from here (the agent was not
+            # where its route said when it failed, or another agent was in the way)
+            sub = p.plan(ob[None], goal, budget=self.budget, exclude_edges=self.memory.removed())
+            if not sub.solved:
+                sub = p.plan(ob[None], goal, budget=self.budget)
         if sub.solved:
             new = sub.agent_plans([agent], hold="waits")[agent]
             self.routes[agent] = list(sub.nodes[0])

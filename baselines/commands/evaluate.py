@@ -38,6 +38,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="validation problems per difficulty and candidate for --c-max auto (default 10)")
     p.add_argument("--validation-seed", type=_non_negative, default=None, metavar="S",
                    help="seed of the validation problems (default: --seed + 10000; must differ from --seed)")
+    p.add_argument("--repair-problems", type=_non_negative, default=0, metavar="P",
+                   help="before the test problems, the search methods' graphs learn which edges their agents fail "
+                        "to traverse on P problems per cell drawn with --repair-seed (never the test problems), and "
+                        "plan the test problems without them; writes edge_memory_<method>.npz (default 0: off)")
+    p.add_argument("--repair-seed", type=_non_negative, default=None, metavar="S",
+                   help="seed of the repair problems (default: --seed + 20000; must differ from --seed)")
     p.add_argument("--policies-at", type=_positive, nargs="+", default=None, metavar="N",
                    help="run the methods without search only at these agent counts (the paper's Table II: 1; "
                         "default: every count)")
@@ -46,6 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the constrained searches (ours, ours_budget) hand an agent's leg over to the unconstrained "
                         "policy once the constrained one is stuck on it (e.g. it will not approach a goal beside "
                         "furniture); the other methods are unchanged")
+    p.add_argument("--hold", choices=("order", "waits", "all"), default=None,
+                   help="how the search methods' agents keep to the plan: 'order' (the plan's order at shared "
+                        "places, however late an agent is), 'waits' or 'all' (the plan's clock; see SearchPolicy; "
+                        "default: the methods' own, 'order')")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -121,16 +131,22 @@ def run(args: argparse.Namespace) -> int:
 
     from baselines.anatomy import failure_records
     from baselines.evaluation import (
+        REPAIR_SEED_OFFSET,
         VALIDATION_SEED_OFFSET,
         EvaluationSetup,
         aggregate,
         evaluate,
+        learn_edge_memory,
         markdown_table,
         select_c_max,
         write_csv,
     )
     from baselines.methods import METHODS, get_methods
 
+    repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
+    if args.repair_problems and repair_seed == args.seed:
+        raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "
+                         "problems")
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
                          "test problems")
@@ -171,6 +187,8 @@ def run(args: argparse.Namespace) -> int:
     if args.fallback:
         methods = [m.with_options(fallback="unconstrained") if m.search and m.policy == "constrained" else m
                    for m in methods]
+    if args.hold is not None:
+        methods = [m.with_options(hold=args.hold) if m.search else m for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
 
@@ -193,10 +211,19 @@ def run(args: argparse.Namespace) -> int:
             {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
              "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
              "table": sel.table}, indent=1))
+    memories = None
+    if args.repair_problems:
+        memories = learn_edge_memory(setup, methods, args.agents, args.difficulty, args.repair_problems,
+                                     seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
+                                     progress=progress, policy_agents=args.policies_at, c_max_by_agents=chosen,
+                                     ray=args.ray)
+        out.mkdir(parents=True, exist_ok=True)
+        for name, memory in memories.items():
+            memory.save(out / f"edge_memory_{name}.npz")
     failures: list = []
     rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                     max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                    c_max_by_agents=chosen, ray=args.ray,
+                    c_max_by_agents=chosen, ray=args.ray, memories=memories,
                     on_run=lambda row, _prob, ex: failures.extend(failure_records(row, ex.failures)))
     agg = aggregate(rows)
     write_csv(rows, out / "runs.csv")
@@ -214,6 +241,9 @@ def run(args: argparse.Namespace) -> int:
     if args.fallback:
         header += ("--fallback: the constrained searches hand a leg on which the constrained policy is stuck "
                    "to the unconstrained policy\n\n")
+    if memories:
+        header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
+                   "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
     (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
     # the figure's rows: the smallest evaluated agent count and the largest one up to 10
@@ -290,7 +320,8 @@ def _run_paper(args: argparse.Namespace) -> int:
     if set(names) - set(PAPER_PROTOCOL_METHODS):
         raise ValueError(f"--protocol paper runs {', '.join(PAPER_PROTOCOL_METHODS)}; not "
                          f"{sorted(set(names) - set(PAPER_PROTOCOL_METHODS))}")
-    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray)):
+    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray), ("--hold", args.hold),
+                        ("--repair-problems", args.repair_problems or None)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
                              "0.1 .. 1, chosen per cell on the test problems)")

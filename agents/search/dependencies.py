@@ -1,0 +1,87 @@
+"""The order in which a multi-agent plan passes shared places: a temporal plan graph.
+
+A plan made on predicted durations is not kept on the clock: a learned policy is slower or
+faster than its critic predicts, gets stuck and escapes. Executing by the clock then lets an
+agent that is late meet another one where the plan had them pass one after the other. Action
+dependency graphs / temporal plan graphs (Hönig et al. 2019) keep the plan's *order* instead:
+whenever two agents visit nearby nodes, the one the plan sends there second may not set off for
+its node before the first has got far enough along its own route.
+
+:func:`plan_dependencies` reads these orderings off a plan: for agent ``j`` and each target index
+``q`` of its route (a waypoint, or its goal at ``q = len(route)``), the pairs ``(i, r)`` such that
+``j`` may head for target ``q`` only once agent ``i`` has reached its target ``r`` (or has arrived).
+Every dependency goes forward in plan time (``i`` reaches ``r`` strictly before ``j`` reaches
+``q`` in the plan), so the graph has no cycle and an execution that respects it cannot deadlock
+on it.
+"""
+from __future__ import annotations
+
+from typing import Dict, List, Sequence, Tuple
+
+import numpy as np
+
+#: per agent: target index -> the (agent, target index) pairs that must be reached first
+Dependencies = List[Dict[int, List[Tuple[int, int]]]]
+
+
+def plan_dependencies(
+    routes: Sequence[Sequence[int]],
+    arrivals: Sequence[Sequence[int]],
+    goals: Sequence[int],
+    goal_arrivals: Sequence[int],
+    close: np.ndarray,
+) -> Dependencies:
+    """The plan-order dependencies between agents (see the module docstring).
+
+    Args:
+        routes: per agent, the node ids of its route (its start first, its goal excluded).
+        arrivals: per agent, the plan time at which it reaches each node of its route.
+        goals: per agent, its goal's node id.
+        goal_arrivals: per agent, the plan time at which it reaches its goal.
+        close: ``close[u, v]``: nodes ``u`` and ``v`` are near enough for two agents there to
+            conflict (the planner's proximity relation).
+
+    Returns:
+        per agent ``j``: ``{q: [(i, r), ...]}``: ``j`` may set off for its target ``q`` only once
+        agent ``i`` has reached its target ``r`` (``r = len(routes[i])``: arrived at its goal).
+        Of several visits of ``i`` near one target of ``j``, only the latest that the plan puts
+        before ``j``'s arrival counts; when ``i`` also reaches its next target before that
+        arrival, ``j`` waits for that one (``i`` has left the place, not just got there).
+    """
+    k = len(routes)
+    if not (len(arrivals) == len(goals) == len(goal_arrivals) == k):
+        raise ValueError(f"routes, arrivals, goals and goal_arrivals must have one entry per agent ({k})")
+    nodes = []
+    times = []
+    for a in range(k):
+        if len(arrivals[a]) != len(routes[a]):
+            raise ValueError(f"agent {a}: {len(routes[a])} route nodes but {len(arrivals[a])} arrival times")
+        nodes.append(np.asarray([*routes[a], goals[a]], dtype=np.int64))
+        times.append(np.asarray([*arrivals[a], goal_arrivals[a]], dtype=np.float64))
+    out: Dependencies = [{} for _ in range(k)]
+    for j in range(k):
+        for i in range(k):
+            if i == j:
+                continue
+            ti, tj = times[i], times[j]
+            mask = close[np.ix_(nodes[i], nodes[j])] & (ti[:, None] < tj[None, :])
+            mask[:, 0] = False  # j stands on its start already
+            for q in np.flatnonzero(mask.any(axis=0)).tolist():
+                m = int(np.flatnonzero(mask[:, q]).max())
+                r = m + 1 if m + 1 < len(ti) and ti[m + 1] < tj[q] else m
+                out[j].setdefault(q, []).append((i, r))
+    return out
+
+
+def proximity_relation(D: np.ndarray, radius: float, n_buffer: int, n_agents: int) -> np.ndarray:
+    """``close[u, v]`` over a problem graph's nodes (buffer nodes, then starts, then goals): predicted
+    distance below ``radius`` in either direction; starts among themselves and goals among themselves
+    are not close (the planner exempts them: agents placed or parked side by side)."""
+    close = np.minimum(D, D.T) < radius
+    np.fill_diagonal(close, True)  # a learned distance from a node to itself is not zero
+    for lo in (n_buffer, n_buffer + n_agents):
+        close[lo:lo + n_agents, lo:lo + n_agents] = False
+    return close
+
+
+__all__ = ["Dependencies", "plan_dependencies", "proximity_relation"]

@@ -1,0 +1,165 @@
+"""Execution that survives delays: plan-order dependencies, the controller keeping them, and a slowed agent."""
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import safe_mapf_envs
+from agents.search import SearchPolicy
+from agents.search.controller import AgentPlan, WaypointController
+from agents.search.dependencies import plan_dependencies, proximity_relation
+
+
+def test_the_agent_the_plan_sends_second_waits_for_the_first():
+    # nodes 0..4 on a line; agent 0 passes node 2 at time 2 and reaches node 3 at time 3; agent 1 crosses
+    # node 2 at time 5 (coming from node 9, going to its goal 8)
+    close = np.eye(10, dtype=bool)
+    deps = plan_dependencies(routes=[[0, 1, 2, 3], [9, 2]], arrivals=[[0, 1, 2, 3], [0, 5]], goals=[4, 8],
+                             goal_arrivals=[4, 6], close=close)
+    assert deps[1] == {1: [(0, 3)]}  # agent 1 sets off for node 2 once agent 0 has reached node 3 (left node 2)
+    assert deps[0] == {}
+    # if agent 0 reaches node 3 only after agent 1's arrival at node 2, agent 1 waits for it to get to node 2 only
+    deps = plan_dependencies([[0, 1, 2, 3], [9, 2]], [[0, 1, 2, 7], [0, 5]], [4, 8], [8, 6], close)
+    assert deps[1] == {1: [(0, 2)]}
+    # an agent's goal is its last target: one that would park by another's route waits until it has passed
+    close[4, 2] = close[2, 4] = True
+    deps = plan_dependencies([[0, 1, 2, 3], [9, 5]], [[0, 1, 2, 3], [0, 1]], [4, 2], [4, 9], close)
+    assert deps[1][2] == [(0, 4)]  # agent 1 parks on node 2 (near agent 0's goal) after agent 0 arrived
+    with pytest.raises(ValueError, match="one entry per agent"):
+        plan_dependencies([[0]], [[0], [1]], [1], [1], close)
+
+
+def test_dependencies_go_forward_in_plan_time():
+    """On random plans every dependency points from an earlier plan event to a later one, so their graph
+    has no cycle and no execution that keeps them can deadlock on them."""
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        n, k = 12, 4
+        close = rng.random((n, n)) < 0.3
+        close |= close.T
+        routes = [rng.choice(n, size=rng.integers(2, 6), replace=False).tolist() for _ in range(k)]
+        arrivals = [np.cumsum(rng.integers(1, 4, size=len(r))).tolist() for r in routes]
+        arrivals = [[a - a_[0] for a in a_] for a_ in arrivals]
+        goals = rng.integers(0, n, size=k).tolist()
+        goal_arrivals = [a[-1] + int(rng.integers(1, 4)) for a in arrivals]
+        times = [a + [g] for a, g in zip(arrivals, goal_arrivals)]
+        deps = plan_dependencies(routes, arrivals, goals, goal_arrivals, close)
+        for j, d in enumerate(deps):
+            for q, pairs in d.items():
+                assert q >= 1
+                for i, r in pairs:
+                    assert i != j and times[i][r] < times[j][q]
+
+
+def test_proximity_relation_exempts_starts_and_goals_among_themselves():
+    D = np.full((7, 7), 9.0)
+    D[3, 4] = D[5, 6] = D[0, 3] = 1.0  # start-start, goal-goal, buffer-start
+    close = proximity_relation(D, 1.5, n_buffer=3, n_agents=2)
+    assert not close[3, 4] and not close[5, 6] and close[0, 3] and close[3, 0] and close.diagonal()[:3].all()
+
+
+def line_distance(obs, goal):
+    return np.abs(np.asarray(obs, float) - np.asarray(goal, float)).sum(axis=-1)
+
+
+def still(obs, goal):
+    return np.zeros((len(obs), 2), np.float32)
+
+
+def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_not_move():
+    wp = np.array([[0.0, 0.0], [5.0, 0.0], [9.0, 0.0]])
+    plans = {"a": AgentPlan(wp, np.array([12.0, 0.0]), starts_at_first=True),
+             "b": AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True,
+                            after={1: [("a", 2)]})}
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=5)
+    obs = {"a": wp[0], "b": wp[0] + [0.0, 1.0]}
+    c.act(obs)
+    assert c.index["b"] == 0 and c.stats.holding["b"] == "wait:a"  # a has not reached its waypoint 2
+    c.act({"a": wp[1], "b": obs["b"]})
+    assert c.index["a"] == 2 and c.index["b"] == 0
+    c.act({"a": wp[2], "b": obs["b"]})  # a reached waypoint 2: b may go
+    assert c.index["b"] == 1 and c.stats.holding["b"] is None
+    # patience: b waits on a, which stays where it is; after order_patience steps b goes anyway
+    plans["b"] = AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True, after={1: [("a", 2)]})
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=5)
+    waited = 0
+    while c.index["b"] == 0 and waited < 20:
+        c.act({"a": wp[0] + [0.0, 3.0], "b": obs["b"]})
+        waited += 1
+    assert 5 <= waited <= 7 and c.index["b"] == 1
+    # an agent that has arrived (no longer live) releases the agents waiting on it, and so does a new plan
+    plans["b"] = AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True, after={1: [("a", 2)]})
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c.act({"b": obs["b"]})
+    assert c.index["b"] == 1
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c.set_plans({"a": AgentPlan(wp[:1], np.array([0.0, 5.0]))})
+    c.act({"a": wp[0], "b": obs["b"]})
+    assert c.index["b"] == 1
+    with pytest.raises(KeyError, match="unknown agents"):
+        c.set_plans({"z": plans["a"]})
+
+
+def test_an_agent_that_hovers_away_from_its_target_counts_as_stuck_and_replans():
+    wp = np.array([[0.0, 0.0], [5.0, 0.0]])
+    asked = []
+
+    def replan(agent, ob, plan):
+        asked.append(agent)
+        return AgentPlan(np.array([ob]), plan.goal, starts_at_first=True)
+
+    c = WaypointController(still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
+                           reach_threshold=0.5, safety_radius=None, stuck_window=4, stuck_tolerance=0.01,
+                           replan=replan, progress_patience=10, escape_steps=1, skip_after=2)
+    for t in range(60):  # it moves (never stuck by the window rule) but comes no closer to waypoint 1
+        c.act({"a": np.array([2.0, 3.0 + 0.3 * (7 * t % 5)])})
+    assert c.stats.stalls >= 2 and len(asked) >= 1 and c.stats.escapes == c.stats.stalls
+    off = WaypointController(still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
+                             reach_threshold=0.5, safety_radius=None, replan=replan)
+    n_asked = len(asked)
+    for t in range(60):
+        off.act({"a": np.array([2.0, 3.0 + 0.3 * (7 * t % 5)])})
+    assert off.stats.stalls == 0 and off.stats.escapes == 0 and len(asked) == n_asked  # the rule is off by default
+    with pytest.raises(ValueError, match="progress_patience"):
+        WaypointController(still, line_distance, {}, progress_patience=0)
+
+
+@pytest.fixture(scope="module")
+def nodes():
+    env = gym.make("SafeCentralObstacle-v0")
+    u = env.unwrapped
+    obs = u.normalize(u.sample_states(300, np.random.default_rng(0))).astype(np.float32)
+    env.close()
+    return obs
+
+
+def crossing_run(agent, nodes, hold, slow):
+    """Two agents cross the map corner to corner, their routes through the same places; agent_0 moves at
+    ``slow`` times the speed its plan assumes. Returns (arrived, contacts, waits on the other agent, steps)."""
+    env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=2, max_cycles=300)
+    policy = SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, c_max=0.5, seed=3, hold=hold)
+    obs, _ = env.reset(seed=0, options={"starts": [[4.0, 45.0], [45.0, 4.0]], "goals": [[45.0, 4.0], [4.0, 45.0]]})
+    arrived, contacts, waits, steps = set(), 0, 0, 0
+    while env.agents:
+        actions, _ = policy.predict({a: obs[a] for a in env.agents})
+        if "agent_0" in actions:
+            actions["agent_0"] = actions["agent_0"] * slow
+        obs, _, term, _, infos = env.step(actions)
+        steps += 1
+        arrived |= {a for a, t in term.items() if t}
+        contacts += sum(len(i.get("collided_with", ())) for i in infos.values())
+        waits += sum(1 for h in policy.stats.holding.values() if h and h.startswith("wait:"))
+    env.close()
+    return arrived, contacts, waits, steps
+
+
+def test_a_slowed_agent_delays_the_other_instead_of_meeting_it(stand_in_models, nodes):
+    """agent_0 drives at half the speed the plan assumes: in the plan's order the other agent waits for it
+    where the plan sends agent_0 through first; both arrive (no deadlock), with fewer contacts than on the
+    plan's clock."""
+    agent = stand_in_models["constrained"]
+    arrived, contacts, waits, steps = crossing_run(agent, nodes, "order", 0.5)
+    assert arrived == {"agent_0", "agent_1"} and waits > 0 and steps < 300
+    clock_arrived, clock_contacts, clock_waits, _ = crossing_run(agent, nodes, "waits", 0.5)
+    assert clock_waits == 0 and contacts < clock_contacts
