@@ -187,6 +187,8 @@ class SearchPolicy:
             waypoints it failed to reach; if there is still none, it localises: it plans from
             where it stands on the whole graph less the edges it failed on (its start is attached
             to the nodes the critic puts nearest); only if that fails too it gives the waypoint up.
+            These replans keep clear of the nodes within ``ban_radius`` of the goals of agents that
+            have arrived (parked there) while a route around them exists.
             The edge it failed on is recorded in ``memory``.
         ban_radius: see ``replan_when_stuck``.
         seed: seed of the controller's escape actions (each episode starts from it).
@@ -584,6 +586,19 @@ class SearchPolicy:
         own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
         return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
 
+    def _parked_nodes(self, agent: str) -> List[int]:
+        """Buffer nodes within ``ban_radius`` predicted steps of the goals of the agents that have arrived
+        (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
+        out: List[int] = []
+        for b in self.agents:
+            if b == agent or b in self._last_names or b not in self._route_graph:
+                continue
+            problem, goal_id, _ = self._route_graph[b]
+            n = problem.n_buffer
+            near = np.minimum(problem.D[goal_id, :n], problem.D[:n, goal_id]) < self.ban_radius
+            out.extend(np.flatnonzero(near).tolist())
+        return out
+
     def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
         """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
         assert self.planner is not None and self.controller is not None
@@ -605,16 +620,17 @@ class SearchPolicy:
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
         goal = self._goals[agent][None]
         edges = self._exclude_edges(agent)
-        sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent], exclude_edges=edges)
+        parked = self._parked_nodes(agent)
+        sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent] + parked, exclude_edges=edges)
         if not sub.solved and self._failed[agent]:
             # banning the neighbourhood cut every route (e.g. the only doorway): ban only the
             # waypoints that were failed, so the agent tries the passage by other nodes
             self._banned[agent] = list(self._failed[agent])
-            sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent], exclude_edges=edges)
+            sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent] + parked, exclude_edges=edges)
         if not sub.solved and self._banned[agent]:
             # localise: a new route from where it stands, over any node, less the failed edges
             self._banned[agent] = []
-            sub = p.plan(ob[None], goal, budget=self.budget, exclude_edges=edges)
+            sub = p.plan(ob[None], goal, budget=self.budget, exclude=parked, exclude_edges=edges)
         if not sub.solved and len(edges):
             # the failed edges were the only way on: try them again from here (the agent was not
             # where its route said when it failed, or another agent was in the way)

@@ -178,3 +178,26 @@ def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_pa
         SearchPolicy.load(path, world, colour="red")
     with pytest.raises(ValueError, match="edge memory is of a graph of 3 nodes"):
         SearchPolicy(planner, world, memory=EdgeMemory(3))
+
+
+def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
+    """Once agent_1 has arrived (it is no longer given to predict), a stuck agent_0 replans around the
+    nodes by agent_1's goal, which now holds an immovable agent."""
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    parked_goal = np.array([9.0, 5.0], np.float32)
+    both = {"agent_0": {"observation": START, "desired_goal": GOAL},
+            "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": parked_goal}}
+    policy.predict(both)
+    assert policy._parked_nodes("agent_0") == []  # nobody has arrived yet
+    policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
+    near = policy._parked_nodes("agent_0")
+    d = np.linalg.norm(planner.observations[near] - parked_goal, axis=1)
+    assert len(near) and (d < policy.ban_radius).all()
+    nodes = planner.observations
+    far = [i for i in range(len(nodes)) if i not in near]
+    assert (np.linalg.norm(nodes[far] - parked_goal, axis=1) >= policy.ban_radius).all()
+    for _ in range(200):  # agent_0 stands still where it is: it gets stuck and replans
+        if policy.stats.replans:
+            break
+        policy.predict({"agent_0": both["agent_0"]})
+    assert policy.stats.replans == 1 and not set(policy.routes["agent_0"]) & set(near)
