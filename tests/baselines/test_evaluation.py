@@ -294,3 +294,75 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
     assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--fallback",
                  "--out", str(tmp_path / "p")]) == 2
     assert "--fallback does not apply" in capsys.readouterr().err
+
+
+def test_the_graph_learns_repairs_on_other_problems_and_keeps_them_frozen(setup, monkeypatch):
+    """learn_edge_memory runs the search methods on problems of another seed, adds up what each run's
+    memory learned and freezes it; evaluate hands every test run a frozen copy, so no test run learns."""
+    import baselines.evaluation as ev
+    from agents.search.repair import EdgeMemory
+    from baselines.evaluation import learn_edge_memory
+
+    with pytest.raises(ValueError, match="repair seed must differ from the test seed"):
+        learn_edge_memory(setup, get_methods(["ours"]), [1], seed=3, test_seed=3)
+    seen = []
+    real = ev.execute
+
+    def spy(env, method, models, planner, starts, goals, **kwargs):
+        ex = real(env, method, models, planner, starts, goals, **kwargs)
+        memory = kwargs.get("memory")
+        seen.append((method.name, None if memory is None else memory.frozen))
+        if method.search and memory is None:  # a learning run: pretend it failed on one edge
+            ex.extra["memory"].record_failure(0, 1)
+        return ex
+
+    monkeypatch.setattr(ev, "execute", spy)
+    memories = learn_edge_memory(setup, get_methods(["sorb", "constrained_policy"]), [1], ["easy"], n_problems=2,
+                                 progress=False)
+    assert set(memories) == {"sorb"} and memories["sorb"].frozen  # only search methods learn
+    assert memories["sorb"].failures == {(0, 1): 2} and memories["sorb"].is_removed(0, 1)
+    assert seen == [("sorb", None), ("sorb", None)]
+    seen.clear()
+    rows = evaluate(setup, get_methods(["sorb", "constrained_policy"]), [1], ["easy"], n_problems=1,
+                    progress=False, memories=memories)
+    assert len(rows) == 2 and seen == [("sorb", True), ("constrained_policy", None)]
+    assert memories["sorb"].failures == {(0, 1): 2}  # unchanged by the test runs
+    assert isinstance(memories["sorb"], EdgeMemory)
+
+
+def test_evaluate_command_writes_the_failure_anatomy_and_takes_hold_and_repairs(tmp_path, capsys, monkeypatch):
+    import csv
+
+    import baselines.evaluation as ev
+    from baselines.cli import main
+
+    holds = []
+    real = ev.execute
+
+    def spy(env, method, models, *args, **kwargs):
+        holds.append((method.name, method.hold))
+        return real(env, method, models, *args, **kwargs)
+
+    monkeypatch.setattr(ev, "execute", spy)
+    code = main(["evaluate", "--agents", "2", "--problems", "1", "--difficulty", "hard", "--methods",
+                 "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--hold", "waits",
+                 "--repair-problems", "1", "--max-cycles", "40", "--out", str(tmp_path)])
+    assert code == 0
+    assert ("ours", "waits") in holds and ("constrained_policy", "order") in holds
+    out = capsys.readouterr().out
+    assert "Why agents did not arrive" in out
+    with open(tmp_path / "runs.csv") as f:
+        runs = list(csv.DictReader(f))
+    with open(tmp_path / "failures.csv") as f:
+        failures = list(csv.DictReader(f))
+    assert len(failures) == sum(2 - int(r["reached"]) for r in runs)  # one row per agent that did not arrive
+    for r in failures:
+        assert r["reason"] in ("never_planned", "deadlock", "out_of_time", "blocked_by_parked", "stuck_on_leg")
+    assert (tmp_path / "anatomy.md").read_text().count("| ours |") == 1
+    assert (tmp_path / "anatomy.png").exists() and (tmp_path / "edge_memory_ours.npz").exists()
+    assert "--repair-problems 1 (seed 20000)" in (tmp_path / "table.md").read_text()
+    assert main(["evaluate", "--repair-problems", "1", "--repair-seed", "0", "--out", str(tmp_path / "x")]) == 2
+    assert "--repair-seed must differ from --seed" in capsys.readouterr().err
+    assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--hold", "waits",
+                 "--out", str(tmp_path / "p")]) == 2
+    assert "--hold does not apply" in capsys.readouterr().err
