@@ -65,7 +65,7 @@ def setup_payload(setup: Any) -> Dict[str, Any]:
                 states=setup.states, observations=setup.observations, D=setup.D, C=setup.C,
                 options=dict(d_max=setup.d_max, proximity_radius=setup.proximity_radius,
                              suboptimality=setup.suboptimality, cbs_time_limit=setup.cbs_time_limit,
-                             min_separation=setup.min_separation))
+                             min_separation=setup.min_separation, max_edges=setup.max_edges))
 
 
 class EvaluationWorker:

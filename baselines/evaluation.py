@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import dijkstra
 from agents.search.graph import NodePairwise
 from agents.search.planner import BufferPlanner
 from agents.search.repair import EdgeMemory
+from agents.search.sparsify import two_way_consistent
 
 from .anatomy import failures_field
 from .methods import METHODS, Method, execute
@@ -75,6 +76,7 @@ class EvaluationSetup:
     suboptimality: float = 1.1
     cbs_time_limit: float = 5.0
     min_separation: float = 2.5
+    max_edges: Optional[int] = None
     shortest: np.ndarray = field(init=False, repr=False)
     planner: BufferPlanner = field(init=False, repr=False)
 
@@ -83,14 +85,17 @@ class EvaluationSetup:
         self.planner = BufferPlanner(
             self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
             d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
-            time_limit=self.cbs_time_limit)
+            time_limit=self.cbs_time_limit, max_edges=self.max_edges)
         # problem difficulty: shortest predicted distances on the planner's own buffer graph
         self.shortest = dijkstra(self.planner.buffer_graph.distance, directed=True)
 
     @classmethod
     def build(cls, env_id: str = "SafeCentralObstacle-v0", n_nodes: int = 1000, seed: int = 0,
-              models: Optional[Dict[str, Any]] = None, **kwargs) -> "EvaluationSetup":
-        """Load the shipped checkpoints (unless ``models`` is given) and build the graph's nodes."""
+              models: Optional[Dict[str, Any]] = None, sparsify: Optional[float] = None,
+              **kwargs) -> "EvaluationSetup":
+        """Load the shipped checkpoints (unless ``models`` is given) and build the graph's nodes
+        (``sparsify``: then keep those that two-way consistency merging at that many steps keeps,
+        :func:`~agents.search.sparsify.two_way_consistent`)."""
         import gymnasium as gym
 
         import safe_mapf_envs
@@ -110,7 +115,11 @@ class EvaluationSetup:
             kwargs["min_separation"] = 1.25 * penv.min_separation
             penv.close()
         D, C = models["unconstrained"].pairwise(obs, obs, aggregate="max")
-        return cls(env_id, models, states, obs, np.asarray(D, np.float64), np.asarray(C, np.float64), **kwargs)
+        D, C = np.asarray(D, np.float64), np.asarray(C, np.float64)
+        if sparsify is not None:
+            kept = two_way_consistent(D, sparsify)
+            states, obs, D, C = states[kept], obs[kept], D[np.ix_(kept, kept)], C[np.ix_(kept, kept)]
+        return cls(env_id, models, states, obs, D, C, **kwargs)
 
     @property
     def max_finite_distance(self) -> float:

@@ -20,6 +20,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
+from .sparsify import cap_out_edges
+
 #: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
 PairwiseFn = Callable[[np.ndarray, np.ndarray], Tuple[np.ndarray, np.ndarray]]
 
@@ -470,7 +472,7 @@ def build_problem_graph(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
     starts: np.ndarray, goals: np.ndarray, *, d_max: float, c_max: float, endpoint_edges: int = 3,
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
-    exclude_edges: Optional[np.ndarray] = None,
+    exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -478,7 +480,8 @@ def build_problem_graph(
     :func:`attach_endpoints`, :func:`problem_edge_mask`, then (with ``relax_cost``)
     :func:`relax_cost_locally`. ``exclude`` lists buffer nodes (``0..N-1``) the graph must not
     use (e.g. a waypoint an agent failed to reach), ``exclude_edges`` (``(E, 2)`` pairs of buffer
-    node ids) edges it must not use (e.g. edges agents failed to traverse).
+    node ids) edges it must not use (e.g. edges agents failed to traverse); ``max_edges`` caps the
+    edges leaving each buffer node towards other buffer nodes at its that many shortest ones.
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -492,6 +495,8 @@ def build_problem_graph(
     keep[ex, :] = False
     keep[:, ex] = False
     keep[ee[:, 0], ee[:, 1]] = False
+    if max_edges is not None:
+        cap_out_edges(keep, D2, max_edges, n)
     ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee)
     graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)

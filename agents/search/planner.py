@@ -42,6 +42,7 @@ from .controller import AgentPlan
 from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf_instance import Proximity
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
+from .sparsify import two_way_consistent
 
 
 @dataclass
@@ -196,6 +197,9 @@ class BufferPlanner:
             suboptimality bound and the same time limit (``None``: no second try).
         budget_labels: label limit of the exact risk-bounded search of :meth:`plan`'s budget
             mode; past it, a Lagrangian path within the budget is used instead.
+        max_edges: keep at most this many edges out of each buffer node towards other buffer nodes
+            (its shortest ones; ``None``: every edge under the cut-offs). Fewer long edges, fewer
+            edges a critic can misjudge (see also :meth:`sparsified`).
     """
 
     def __init__(
@@ -215,6 +219,7 @@ class BufferPlanner:
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
         budget_labels: int = 2_000,
+        max_edges: Optional[int] = None,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -244,6 +249,9 @@ class BufferPlanner:
             raise ValueError(f"fallback_suboptimality must be >= 1 or None, got {fallback_suboptimality!r}")
         self.fallback_suboptimality = fallback_suboptimality
         self.budget_labels = int(budget_labels)
+        if max_edges is not None and int(max_edges) < 1:
+            raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
+        self.max_edges = None if max_edges is None else int(max_edges)
         self._buffer_graph: Optional[WaypointGraph] = None
 
     @property
@@ -269,7 +277,19 @@ class BufferPlanner:
             d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
-            fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
+            fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
+            max_edges=self.max_edges)
+
+    def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
+        """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
+        (:func:`~agents.search.sparsify.two_way_consistent`), and the kept node indices."""
+        kept = two_way_consistent(self.D, tau, order)
+        obs = self.observations[kept]
+        pairwise = self.pairwise
+        if isinstance(pairwise, NodePairwise):  # it caches the codes of its own nodes
+            pairwise = NodePairwise(pairwise.model, obs, pairwise.aggregate)
+        ix = np.ix_(kept, kept)
+        return BufferPlanner(obs, self.D[ix], self.C[ix], pairwise, **self.options()), kept
 
     def with_options(self, **kwargs) -> "BufferPlanner":
         """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
@@ -295,7 +315,8 @@ class BufferPlanner:
         starts, goals = self._check_endpoints(starts, goals)
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
-                                   relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges)
+                                   relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
+                                   max_edges=self.max_edges)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None) -> MultiAgentPlan:

@@ -272,6 +272,7 @@ class SearchPolicy:
         n_nodes: int = 1000,
         seed: int = 0,
         aggregate: str = "max",
+        sparsify: Optional[float] = None,
         **options: Any,
     ) -> "SearchPolicy":
         """Build the graph with ``critic`` and drive with ``driver`` (default: the critic).
@@ -286,6 +287,9 @@ class SearchPolicy:
             n_nodes: graph size when ``nodes`` is a replay buffer or ``None``.
             seed: seed of the node draw (and of the controller, unless ``options`` has one).
             aggregate: ensemble aggregation of the critic (``"max"``: pessimistic).
+            sparsify: merge nodes the critic cannot tell apart, as starts and as goals, within
+                this many steps (two-way consistency, :meth:`BufferPlanner.sparsified`); ``None``:
+                keep every node.
             options: :class:`BufferPlanner` options (``d_max``, ``c_max``,
                 ``proximity_radius``, ``suboptimality``, ``time_limit``, ...) and
                 :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
@@ -309,6 +313,8 @@ class SearchPolicy:
             obs = np.asarray(nodes)
         planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate,
                                            **{k: v for k, v in options.items() if k in planner_names})
+        if sparsify is not None:
+            planner, _ = planner.sparsified(sparsify)
         kwargs = {k: v for k, v in options.items() if k in policy_names}
         kwargs.setdefault("seed", seed)
         return cls(planner, driver if driver is not None else critic, **kwargs)

@@ -38,6 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="validation problems per difficulty and candidate for --c-max auto (default 10)")
     p.add_argument("--validation-seed", type=_non_negative, default=None, metavar="S",
                    help="seed of the validation problems (default: --seed + 10000; must differ from --seed)")
+    p.add_argument("--sparsify", type=_non_negative_float, default=None, metavar="TAU",
+                   help="keep only the graph nodes that two-way consistency merging keeps: a node goes when the "
+                        "critic's distances to and from the nodes kept so far are within TAU steps of another "
+                        "kept node's (default: keep all --nodes)")
+    p.add_argument("--max-edges", type=_positive, default=None, metavar="K",
+                   help="keep at most K edges out of each graph node (its shortest; default: every edge under "
+                        "the cut-offs)")
     p.add_argument("--repair-problems", type=_non_negative, default=0, metavar="P",
                    help="before the test problems, the search methods' graphs learn which edges their agents fail "
                         "to traverse on P problems per cell drawn with --repair-seed (never the test problems), and "
@@ -117,6 +124,16 @@ def _int_at_least(minimum: int, what: str):
 
 
 _positive = _int_at_least(1, "positive")
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative number, got {text!r}")
+    return value
 _non_negative = _int_at_least(0, "non-negative")
 
 
@@ -194,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
 
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
-    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
+    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
+                                  sparsify=args.sparsify, max_edges=args.max_edges)
     progress = not args.no_progress and not args.json
     out = Path(args.out)
     if chosen is None and args.c_max == "auto":
@@ -320,11 +338,15 @@ def _run_paper(args: argparse.Namespace) -> int:
     if set(names) - set(PAPER_PROTOCOL_METHODS):
         raise ValueError(f"--protocol paper runs {', '.join(PAPER_PROTOCOL_METHODS)}; not "
                          f"{sorted(set(names) - set(PAPER_PROTOCOL_METHODS))}")
-    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray), ("--hold", args.hold),
-                        ("--repair-problems", args.repair_problems or None)):
+    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
                              "0.1 .. 1, chosen per cell on the test problems)")
+    for flag, value in (("--hold", args.hold), ("--repair-problems", args.repair_problems or None),
+                        ("--sparsify", args.sparsify), ("--max-edges", args.max_edges)):
+        if value is not None:
+            raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
+                             "open loop)")
     if args.fallback:
         raise ValueError("--fallback does not apply to --protocol paper (its agents follow their plans open loop)")
     methods = get_methods(names)
