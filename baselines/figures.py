@@ -145,15 +145,20 @@ def execution_frames(field, trajectories: np.ndarray, goals: np.ndarray, goal_th
     return frames
 
 
-def write_gif(frames: Sequence[np.ndarray], path, fps: float = 12.0) -> Path:
-    """Write RGB ``frames`` as a looping GIF (Pillow, which matplotlib installs)."""
+def write_gif(frames: Sequence[np.ndarray], path, fps: float = 12.0, colors: int = 64) -> Path:
+    """Write RGB ``frames`` as a looping GIF (Pillow, which matplotlib installs), each frame with an
+    adaptive palette of ``colors`` colours (the cost field's gradients need few; 64 instead of 256
+    makes a 10-agent apartment run 1.3 MB instead of 3.3 MB)."""
     from PIL import Image
 
     if not len(frames):
         raise ValueError("no frames to write")
+    if not 2 <= colors <= 256:
+        raise ValueError(f"colors must be in [2, 256], got {colors!r}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)).quantize(colors=colors, method=Image.Quantize.MEDIANCUT)
+              for f in frames]
     images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0,
                    optimize=True)
     return path
