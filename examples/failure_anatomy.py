@@ -6,7 +6,7 @@ of the failed agents per (method, agents, difficulty) cell, with the totals; ``-
 stacked bars of every folder in one picture.
 
     python examples/failure_anatomy.py examples/table2/apt0 examples/table2/apt1 --figure anatomy.png
-    python examples/failure_anatomy.py before/apt1 after/apt1 --labels before after
+    python examples/failure_anatomy.py before/apt1 after/apt1 --labels before after --problems 10 --methods ours
 """
 from __future__ import annotations
 
@@ -40,13 +40,18 @@ def main(argv=None) -> int:
     p.add_argument("folders", nargs="+", type=Path, help="evaluation output folders (each with runs.csv)")
     p.add_argument("--labels", nargs="+", default=None, help="a name per folder (default: the folder names)")
     p.add_argument("--figure", type=Path, default=None, help="write the stacked bars of every folder to this PNG")
+    p.add_argument("--problems", type=int, default=None, metavar="N",
+                   help="only the first N problems of each cell (the same problems in runs with more per cell)")
+    p.add_argument("--methods", nargs="+", default=None, help="only these methods (default: all)")
     args = p.parse_args(argv)
     labels = args.labels or [str(f) for f in args.folders]
     if len(labels) != len(args.folders):
         p.error(f"{len(args.folders)} folders but {len(labels)} labels")
     summaries = []
     for folder, label in zip(args.folders, labels):
-        summary = failure_summary(read_rows(folder))
+        rows = [r for r in read_rows(folder) if (args.problems is None or int(r["problem"]) < args.problems)
+                and (args.methods is None or r["method"] in args.methods)]
+        summary = failure_summary(rows)
         summaries.append(summary)
         t = totals(summary)
         n = t["failed_agents"]
