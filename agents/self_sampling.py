@@ -36,6 +36,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
+from safe_mapf_envs import NavigationEnvBase
+
 Band = Union[float, Tuple[float, float]]
 
 
@@ -79,11 +81,18 @@ class ProblemSampler:
 
 
 class UniformSampler(ProblemSampler):
-    """The environment's own sampling (uniform start and goal for the envs of this project)."""
+    """Uniform start and goal in the free space.
+
+    The environments of this project sample default goals within reach of their time limit;
+    this sampler asks them for goals anywhere (``goal_distance="uniform"``), as it always
+    has. Other environments sample as they do by default.
+    """
 
     name = "uniform"
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
+        if isinstance(env.unwrapped, NavigationEnvBase):
+            return {"goal_distance": "uniform"}
         return None
 
 

@@ -17,10 +17,14 @@ Importing the package registers the Gymnasium ids listed in
     # N agents on the same map (PettingZoo; ``env``/``raw_env`` give the AEC form)
     par = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=10)
 
+    # one Box per observation (observation and goal concatenated), for SuperSuit and MlpPolicy
+    flat = gym.make("SafeCentralObstacle-v0", observation_format="flat")
+
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
 from .base import NavigationEnvBase
 from .cost import COST_FUNCTIONS, ObstacleField
+from .formats import OBSERVATION_FORMATS, flat_space, flatten_observation
 from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
 from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
 from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
@@ -41,6 +45,7 @@ __all__ = [
     "EnvSpec",
     "GridMap",
     "MAPS",
+    "OBSERVATION_FORMATS",
     "NavigationEnvBase",
     "NavigationScenario",
     "ObstacleField",
@@ -51,6 +56,8 @@ __all__ = [
     "Scene",
     "env_spec",
     "env",
+    "flat_space",
+    "flatten_observation",
     "get_map",
     "multi",
     "parallel_env",
