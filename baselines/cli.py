@@ -29,6 +29,12 @@ class DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action) or text
 
 
+def show_progress(disabled: bool = False) -> bool:
+    """Whether a command draws a progress bar: not when ``disabled``, and only on a terminal
+    (a bar redrawn with ``\\r`` would fill a log file or a pipe with hundreds of lines)."""
+    return not disabled and sys.stderr.isatty()
+
+
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "baselines.commands.envs",

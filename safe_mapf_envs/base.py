@@ -89,7 +89,7 @@ class NavigationEnvBase:
         self._window: Optional[HumanWindow] = None
 
     def _open_window(self) -> None:
-        """Open the window of the ``human`` render mode (``RuntimeError`` without a display)."""
+        """Open the window of the ``human`` render mode (it warns and shows nothing without a display)."""
         if self.render_mode == "human" and self._window is None:
             self._window = HumanWindow(type(self).__name__)
 

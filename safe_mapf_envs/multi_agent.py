@@ -175,7 +175,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, every agent
     in its own colour with its goal and trail, parked agents ringed, collision markers and
     the planned waypoints of :meth:`set_waypoints`; ``"human"`` shows it in a matplotlib
-    window and needs a display (``RuntimeError`` otherwise).
+    window and needs a display (without one it warns and shows nothing).
 
     Helpers shared with the single-agent env (see :class:`~safe_mapf_envs.base.NavigationEnvBase`):
     :meth:`sample_states`, :meth:`geodesic_distance`, :meth:`observations_at`, :meth:`normalize`.

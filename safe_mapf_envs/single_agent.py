@@ -143,7 +143,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, obstacles,
     agent, goal, trail and planned waypoints (see :meth:`set_waypoints`); ``"human"`` shows it
-    in a matplotlib window and needs a display (``RuntimeError`` otherwise).
+    in a matplotlib window and needs a display (without one it warns and shows nothing).
 
     Helpers for evaluation and planning (shared with the multi-agent env, see
     :class:`~safe_mapf_envs.base.NavigationEnvBase`): :meth:`sample_states`,

@@ -57,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video", action="store_true",
                    help="also write run.gif: the last search method's execution of the figure's multi-agent problem")
     p.add_argument("--json", action="store_true", help="print the aggregate rows as JSON instead of the table")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (it is drawn only when stderr is a terminal)")
     p.add_argument("--protocol", choices=("strict", "paper"), default="strict",
                    help="strict (default): the protocol above (problems on the graph, CBS with waiting and "
                         "proximity conflicts, closed-loop following, agents that collide). paper: the "
@@ -156,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
+    from baselines.cli import show_progress
     from baselines.evaluation import (
         VALIDATION_SEED_OFFSET,
         EvaluationSetup,
@@ -219,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
-    progress = not args.no_progress and not args.json
+    progress = show_progress(args.no_progress or args.json)
     if chosen is None and args.c_max == "auto":
         constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]  # not empty: checked above
         vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
@@ -283,6 +285,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     """``--protocol paper``: the published code's conventions (see :mod:`baselines.paper_protocol`)."""
 
     from agents import load_pretrained
+    from baselines.cli import show_progress
     from baselines.evaluation import aggregate, markdown_table, write_csv
     from baselines.methods import get_methods
     from baselines.output import RowWriter
@@ -315,7 +318,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
     setup = PaperSetup.build(args.env, models, n_nodes=args.nodes, seed=args.seed)
-    progress = not args.no_progress and not args.json
+    progress = show_progress(args.no_progress or args.json)
     with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
         rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                               max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,

@@ -94,7 +94,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue the run in --out from its last resume point, up to --timesteps steps in all")
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
-    g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
+    g.add_argument("--no-progress", dest="progress_bar", action="store_false",
+                   help="hide the progress bar (it is drawn only when stderr is a terminal)")
     g.add_argument("--tensorboard", dest="tensorboard_log", default=None,
                    help="write TensorBoard event files to this folder")
     g.add_argument("--verbose", type=int, default=d.verbose)
@@ -118,12 +119,14 @@ def config_from_args(args: argparse.Namespace):
     import dataclasses
 
     from agents.training import TrainConfig
+    from baselines.cli import show_progress
 
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     kwargs = {k: v for k, v in vars(args).items() if k in names}
     for k in ("target_distance", "target_cost", "oracle_band"):
         if kwargs.get(k) is not None:
             kwargs[k] = tuple(kwargs[k])
+    kwargs["progress_bar"] = show_progress(not kwargs.get("progress_bar", True))
     return TrainConfig(**kwargs)
 
 

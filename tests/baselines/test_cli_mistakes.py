@@ -1,5 +1,7 @@
 """Every mistake gets its message before any work: exit code 2, no traceback, nothing left behind."""
 import csv
+import io
+import sys
 
 import pytest
 
@@ -119,3 +121,20 @@ def test_the_small_run_note_says_what_the_full_table_takes():
     args = build_parser().parse_args(["evaluate"])
     assert "1126 s" in _small_run_note(args)
     assert _small_run_note(build_parser().parse_args(["evaluate", "--problems", "50"])) == ""
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bars_are_drawn_only_on_a_terminal(monkeypatch):
+    from baselines.cli import show_progress
+    from baselines.commands.train import config_from_args
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # a log file or a pipe
+    assert not show_progress() and config_from_args(build_parser().parse_args(["train"])).progress_bar is False
+    monkeypatch.setattr(sys, "stderr", _Terminal())
+    assert show_progress() and not show_progress(disabled=True)
+    assert config_from_args(build_parser().parse_args(["train"])).progress_bar is True
+    assert config_from_args(build_parser().parse_args(["train", "--no-progress"])).progress_bar is False
