@@ -22,6 +22,8 @@ Importing the package registers the Gymnasium ids listed in
 
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
+from importlib import metadata as _metadata
+
 from .base import NavigationEnvBase
 from .cost import COST_FUNCTIONS, ObstacleField
 from .formats import OBSERVATION_FORMATS, flat_space, flatten_observation
@@ -32,6 +34,12 @@ from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout
 from .single_agent import SafeNavigationEnv
 from .wrappers import SafetyGymnasiumStyle
+
+try:
+    #: The installed distribution's version (``safe-mapf``), shared by ``agents`` and ``baselines``.
+    __version__ = _metadata.version("safe-mapf")
+except _metadata.PackageNotFoundError:  # run from a source tree that was never installed
+    __version__ = "0+unknown"
 
 register_envs()
 
@@ -53,6 +61,7 @@ __all__ = [
     "SafeMultiNavigationEnv",
     "SafeNavigationEnv",
     "SafetyGymnasiumStyle",
+    "__version__",
     "Scene",
     "env_spec",
     "env",
