@@ -7,6 +7,7 @@ computed so far.
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import os
 import tempfile
@@ -40,6 +41,28 @@ def check_output_dir(path: Union[str, os.PathLike], flag: str = "--out") -> Path
                 pass
         raise ValueError(f"{flag} {str(out)!r} is not a writable folder: {exc.strerror or exc}") from None
     return out
+
+
+#: Where the figure scripts write unless asked to refresh the README's pictures.
+FIGURES_OUT = Path("figures_out")
+
+
+def add_figure_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--out`` (default ``figures_out/``) and ``--refresh-readme`` for a script that draws figures.
+
+    Figures go to ``--out`` so that a run never changes tracked files by accident;
+    ``--refresh-readme`` writes them where the README shows them instead.
+    """
+    parser.add_argument("--out", type=Path, default=FIGURES_OUT, help="folder to write the figures in "
+                        f"(default: {FIGURES_OUT}/)")
+    parser.add_argument("--refresh-readme", action="store_true",
+                        help="write into examples/figures/, the README's pictures (tracked files), instead of --out")
+
+
+def figure_output_dir(args: argparse.Namespace, readme_dir: Path) -> Path:
+    """The folder of :func:`add_figure_output_arguments`' choice, created and checked writable."""
+    return check_output_dir(readme_dir if args.refresh_readme else args.out,
+                            flag="--refresh-readme" if args.refresh_readme else "--out")
 
 
 class RowWriter:
@@ -79,4 +102,4 @@ class RowWriter:
         self.close()
 
 
-__all__ = ["RowWriter", "check_output_dir"]
+__all__ = ["FIGURES_OUT", "RowWriter", "add_figure_output_arguments", "check_output_dir", "figure_output_dir"]

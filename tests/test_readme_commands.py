@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
 
 #: Scripts without arguments: nothing to parse, and they do their (long) work at once.
-NO_ARGUMENTS = {"examples/demo.py", "examples/make_map_figures.py", "examples/plan_and_execute.py"}
+NO_ARGUMENTS = {"examples/demo.py", "examples/plan_and_execute.py"}
 #: Inline mentions of a command's name rather than commands.
 NAMES = {"safe-mapf mapf"}
 #: Commands cheap enough to run in full (they read shipped result files).
@@ -99,3 +99,21 @@ def test_the_cheap_readme_commands_run(command, monkeypatch, capsys):
         monkeypatch.setattr(sys, "argv", argv[1:])
         runpy.run_path(str(ROOT / argv[1]), run_name="__main__")
     assert capsys.readouterr().out.strip()
+
+
+def test_figure_scripts_write_to_their_folder_unless_asked_to_refresh_the_readme(tmp_path, monkeypatch):
+    from baselines.output import FIGURES_OUT, add_figure_output_arguments, figure_output_dir
+
+    parser = argparse.ArgumentParser()
+    add_figure_output_arguments(parser)
+    assert parser.parse_args([]).out == FIGURES_OUT
+    readme = tmp_path / "readme"
+    assert figure_output_dir(parser.parse_args(["--out", str(tmp_path / "f")]), readme) == tmp_path / "f"
+    assert figure_output_dir(parser.parse_args(["--refresh-readme"]), readme) == readme and readme.is_dir()
+    tracked = sorted((ROOT / "examples" / "figures" / "maps").glob("*.png"))
+    before = [p.stat().st_mtime_ns for p in tracked]
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["make_map_figures.py"])
+    runpy.run_path(str(ROOT / "examples" / "make_map_figures.py"), run_name="__main__")
+    assert sorted(p.name for p in (tmp_path / "figures_out" / "maps").glob("*.png")) == [p.name for p in tracked]
+    assert [p.stat().st_mtime_ns for p in tracked] == before
