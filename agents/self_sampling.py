@@ -36,8 +36,6 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
-from safe_mapf_envs import NavigationEnvBase
-
 Band = Union[float, Tuple[float, float]]
 
 
@@ -91,7 +89,9 @@ class UniformSampler(ProblemSampler):
     name = "uniform"
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
-        if isinstance(env.unwrapped, NavigationEnvBase):
+        from safe_mapf_envs import NavigationEnvBase  # here: importing the algorithm registers no env
+
+        if isinstance(getattr(env, "unwrapped", None), NavigationEnvBase):
             return {"goal_distance": "uniform"}
         return None
 
