@@ -20,6 +20,9 @@ Importing the package registers the Gymnasium ids listed in
     # one Box per observation (observation and goal concatenated), for SuperSuit and MlpPolicy
     flat = gym.make("SafeCentralObstacle-v0", observation_format="flat")
 
+    # 64 episodes stepped in one batch (the same episodes as vectorization_mode="sync")
+    vec = gym.make_vec("SafeCentralObstacle-v0", num_envs=64, vectorization_mode="vector_entry_point")
+
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
 from importlib import metadata as _metadata
@@ -33,6 +36,7 @@ from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
 from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout
 from .single_agent import SafeNavigationEnv
+from .vector import SafeNavigationVectorEnv
 from .wrappers import SafetyGymnasiumStyle
 
 try:
@@ -60,6 +64,7 @@ __all__ = [
     "PanoramaSensor",
     "SafeMultiNavigationEnv",
     "SafeNavigationEnv",
+    "SafeNavigationVectorEnv",
     "SafetyGymnasiumStyle",
     "__version__",
     "Scene",

@@ -24,6 +24,8 @@ class EnvSpec:
 
 
 _SINGLE = "safe_mapf_envs.single_agent:SafeNavigationEnv"
+#: ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` (vector ids)
+_VECTOR = "safe_mapf_envs.vector:SafeNavigationVectorEnv"
 
 #: Every registered id. Training ids use 20 steps per episode, as in the paper.
 ENV_SPECS: List[EnvSpec] = [
@@ -65,6 +67,7 @@ def register_envs() -> None:
             entry_point=spec.entry_point,
             max_episode_steps=spec.max_episode_steps,
             kwargs={"goal_distance": reachable_goal_band(spec), **spec.kwargs},
+            vector_entry_point=_VECTOR if spec.obs_type == "vector" else None,
         )
 
 

@@ -240,13 +240,13 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             "is_success": dist <= self.goal_threshold,
         }
 
-    # ----------------------------------------------------------------- gym API
-    def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
-        """Start an episode; see Starting State in the class docstring for ``options``."""
-        super().reset(seed=seed)
-        options = parse_reset_options(options, _RESET_OPTIONS, type(self).__name__)
+    def draw_problem(self, rng: np.random.Generator, options: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
+        """The ``(start, goal)`` of an episode (world units) from ``rng`` and parsed reset ``options``.
+
+        What :meth:`reset` draws, in the same order from the same generator (the native vector
+        env draws each sub-env's problems with it too).
+        """
         sc = self.scenario
-        rng = self.np_random
         if options.get("start") is not None:
             start = sc.check_position(options["start"], "start")
         else:
@@ -258,6 +258,15 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             goal = sc.sample_goal_in_band(start, band, rng)
         else:
             goal = sc.sample_states(1, rng)[0]
+        return start, goal
+
+    # ----------------------------------------------------------------- gym API
+    def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
+        """Start an episode; see Starting State in the class docstring for ``options``."""
+        super().reset(seed=seed)
+        options = parse_reset_options(options, _RESET_OPTIONS, type(self).__name__)
+        sc = self.scenario
+        start, goal = self.draw_problem(self.np_random, options)
         self._goal = goal
         if self.sensor is not None:
             self._goal_image = self.sensor.render(goal)
