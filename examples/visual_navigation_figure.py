@@ -108,14 +108,15 @@ def navigation_figure(setup: EvaluationSetup, difficulty: str, seed: int, path: 
     for x0, y0, x1, y1 in field.boxes:
         ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.25"))
     ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:blue", lw=2, label="executed path")
-    ax.plot(wp_pos[:, 0], wp_pos[:, 1], "X", color="tab:orange", ms=10, mec="k", label="waypoints")
+    # the markers of the trajectory figure and the GIFs (baselines.figures.MARKER_LEGEND)
+    ax.plot(wp_pos[:, 0], wp_pos[:, 1], "D", color="tab:orange", ms=8, mec="k", label="waypoints")
     for i, p in enumerate(wp_pos):
         ax.annotate(str(i + 1), p, textcoords="offset points", xytext=(6, 6), fontsize=10, weight="bold")
     for t, p in zip(steps, traj[steps]):
         ax.plot(*p, "o", color="white", ms=5, mec="tab:blue")
         ax.annotate(f"t={t}", p, textcoords="offset points", xytext=(4, -12), fontsize=7, color="tab:blue")
     ax.plot(*prob.starts[0], "o", color="tab:green", ms=11, mec="k", label="start")
-    ax.plot(*prob.goals[0], "*", color="tab:red", ms=17, mec="k", label="goal")
+    ax.plot(*prob.goals[0], "x", color="tab:red", ms=14, mew=3.5, label="goal")
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)  # row 0 at the top, as the map and the renderer draw it
     ax.set_aspect("equal")
