@@ -16,7 +16,14 @@ from __future__ import annotations
 
 import importlib
 import sys
+from importlib import metadata as _metadata
 from typing import Any
+
+try:
+    #: The installed distribution's version (``safe-mapf``; the same as ``safe_mapf_envs.__version__``).
+    __version__ = _metadata.version("safe-mapf")
+except _metadata.PackageNotFoundError:  # run from a source tree that was never installed
+    __version__ = "0+unknown"
 
 # whether torch was imported before this package (agents.threads then cannot read torch's
 # start-up thread count and estimates it)

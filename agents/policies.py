@@ -400,6 +400,25 @@ class EncodedObservations:
         return self.n
 
 
+def _checked_values(arr: np.ndarray, space: spaces.Space, what: str) -> np.ndarray:
+    """``arr`` if its values fit ``space``'s kind: ``uint8`` images as integers in 0-255 (returned
+    as ``uint8``), vectors finite; else ``ValueError`` naming ``what``."""
+    if space.dtype == np.uint8:
+        if arr.dtype.kind not in "ui":
+            raise ValueError(f"{what} must be uint8 images (integers 0-255) like the observation space, got "
+                             f"{arr.dtype} values; pass the environment's images as they come")
+        if arr.dtype != np.uint8:
+            if arr.size and (arr.min() < 0 or arr.max() > 255):
+                raise ValueError(f"{what} has values outside 0-255")
+            arr = arr.astype(np.uint8)
+        return arr
+    if arr.dtype.kind not in "fiub":
+        raise ValueError(f"{what} must be real numbers, got {arr.dtype} values")
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} contains NaN or inf")
+    return arr
+
+
 class SafeGoalPolicy(BasePolicy):
     """Actor, distance-critic ensemble and cost-critic ensemble (plus targets) of the safe agent.
 
@@ -600,6 +619,16 @@ class SafeGoalPolicy(BasePolicy):
     def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
         return self.actor(observation)
 
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = False) -> Tuple[np.ndarray, Any]:
+        """SB3's ``predict``, refusing what would give meaningless actions silently: NaN or inf
+        values, and images that are not integers in 0-255 (``ValueError`` naming the key)."""
+        if isinstance(observation, dict):
+            for key, space in cast(spaces.Dict, self.observation_space).spaces.items():
+                if key in observation:
+                    observation = {**observation, key: _checked_values(np.asarray(observation[key]), space, key)}
+        return super().predict(observation, state, episode_start, deterministic)
+
     def set_training_mode(self, mode: bool) -> None:
         # What ``actor/critic/cost_critic.set_training_mode`` do, with each module visited once
         # (SB3 toggles the mode on every environment step; a shared encoder sits in six places).
@@ -620,10 +649,9 @@ class SafeGoalPolicy(BasePolicy):
         else:
             raise ValueError(f"{what} must be one observation of shape {shape} or a batch (N, *{shape}), "
                              f"got shape {arr.shape}")
+        arr = _checked_values(arr, self.observation_space["observation"], what)
         if arr.dtype != np.uint8:
             arr = arr.astype(np.float32, copy=False)
-            if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{what} contains NaN or inf")
         return th.as_tensor(np.ascontiguousarray(arr), device=self.device), single
 
     def _pair_values(self, obs: th.Tensor, goals: th.Tensor, quantities: Sequence[str]) -> Dict[str, th.Tensor]:

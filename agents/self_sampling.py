@@ -79,11 +79,20 @@ class ProblemSampler:
 
 
 class UniformSampler(ProblemSampler):
-    """The environment's own sampling (uniform start and goal for the envs of this project)."""
+    """Uniform start and goal in the free space.
+
+    The environments of this project sample default goals within reach of their time limit;
+    this sampler asks them for goals anywhere (``goal_distance="uniform"``), as it always
+    has. Other environments sample as they do by default.
+    """
 
     name = "uniform"
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
+        from safe_mapf_envs import NavigationEnvBase  # here: importing the algorithm registers no env
+
+        if isinstance(getattr(env, "unwrapped", None), NavigationEnvBase):
+            return {"goal_distance": "uniform"}
         return None
 
 

@@ -139,6 +139,9 @@ class TrainConfig:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad setting."""
+        from safe_mapf_envs.registration import check_env_id
+
+        check_env_id(self.env_id)
         if self.stage not in STAGES:
             raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
         if self.stage == "constrained" and not self.init:

@@ -17,6 +17,24 @@ from typing import Sequence
 class MissingExtraError(ImportError):
     """An optional dependency a flag needs (e.g. Ray for ``--ray``) is not installed."""
 
+class DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends "(default: X)" to an option's help only where it says something: not for flags
+    (``store_true``/``store_false``), not for a default of ``None`` and not where the help text
+    already states the default in words. Every subcommand's ``--help`` uses it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.nargs == 0 or action.default is None or "default" in text:
+            return text
+        return super()._get_help_string(action) or text
+
+
+def show_progress(disabled: bool = False) -> bool:
+    """Whether a command draws a progress bar: not when ``disabled``, and only on a terminal
+    (a bar redrawn with ``\\r`` would fill a log file or a pipe with hundreds of lines)."""
+    return not disabled and sys.stderr.isatty()
+
+
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "baselines.commands.envs",
@@ -43,6 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.register(sub)
+    for command in sub.choices.values():
+        command.formatter_class = DefaultsHelpFormatter
     return parser
 
 
@@ -56,7 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # so that flushing stdout at exit does not fail again
         return 1
-    except (ValueError, FileNotFoundError, MissingExtraError) as exc:
+    except (ValueError, OSError, MissingExtraError) as exc:  # bad input, unreadable or unwritable files
         print(f"safe-mapf {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -174,7 +174,7 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
             if len(s_ids) == n_agents:
                 break
         else:
-            raise RuntimeError(f"could not place {n_agents} agents for a {difficulty} problem "
+            raise ValueError(f"could not place {n_agents} agents for a {difficulty} problem "
                                f"(target {target:.1f}); use fewer agents or more graph nodes")
         s_ids, g_ids = np.array(s_ids), np.array(g_ids)
         problems.append(Problem(difficulty, p, target, s_ids, g_ids, pos[s_ids].copy(), pos[g_ids].copy(),

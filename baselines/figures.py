@@ -16,6 +16,10 @@ import numpy as np
 from .evaluation import EvaluationSetup, make_problems
 from .methods import Method, execute
 
+#: One legend for the trajectory figure and the execution frames (the environments' renderer):
+#: the same marker means the same thing in both.
+MARKER_LEGEND = "lines: trajectories, diamonds: planned waypoints, x: goals"
+
 
 def _runs(setup: EvaluationSetup, methods: Sequence[Method], n_agents: int, difficulty: str, seed: int,
           problem: int, max_cycles: int):
@@ -76,10 +80,10 @@ def trajectory_figure(
                 col = colors(i % 10)
                 tr = ex.trajectories[:, i]
                 ax.plot(tr[:, 0], tr[:, 1], "-", color=col, lw=1.6)
-                if wp and len(wp[i]):
-                    ax.plot(wp[i][:, 0], wp[i][:, 1], "x", color=col, ms=4, mew=1.2)
+                if wp and len(wp[i]):  # the markers of the rendered frames and GIFs (see MARKER_LEGEND)
+                    ax.plot(wp[i][:, 0], wp[i][:, 1], "D", color=col, mfc="none", ms=4, mew=1.0)
                 ax.plot(*prob.starts[i], "o", color=col, ms=6, mec="k")
-                ax.plot(*prob.goals[i], "*", color=col, ms=11, mec="k")
+                ax.plot(*prob.goals[i], "x", color=col, ms=9, mew=2.2)
             ok = "" if ex.success else ", failed"
             ax.set_title(f"{m.label}\nN={prob.n_agents}: max cost {ex.cost.max():.1f}{ok}", fontsize=8)
             ax.set_xlim(0, w)
@@ -89,8 +93,7 @@ def trajectory_figure(
             ax.set_aspect("equal")
     import textwrap
 
-    title = (f"{setup.env_id}, {difficulty} problems: trajectories (lines), waypoints (x), "
-             f"starts (o), goals (*) over the cost field")
+    title = f"{setup.env_id}, {difficulty} problems over the cost field; {MARKER_LEGEND}, discs: starts"
     fig.suptitle(textwrap.fill(title, width=max(40, int(22 * len(methods)))), fontsize=9)
     fig.tight_layout()
     path = Path(path)
@@ -140,8 +143,8 @@ def execution_frames(field, trajectories: np.ndarray, goals: np.ndarray, goal_th
                               waypoints=waypoints, parked=arrived[t])
         img = np.ascontiguousarray(img[::-1])  # y up, as in the trajectory figure
         done = int(arrived[t].sum())
-        frames.append(caption(img, [title, f"step {t}: {done}/{traj.shape[1]} agents arrived; "
-                                           "lines: trails, diamonds: planned waypoints, x: goals"]))
+        frames.append(caption(img, [title, f"step {t}: {done}/{traj.shape[1]} agents arrived; {MARKER_LEGEND}, "
+                                           "discs: agents"]))
     return frames
 
 
@@ -184,4 +187,4 @@ def run_animation(setup: EvaluationSetup, method: Method, path, n_agents: int = 
     return write_gif(frames, path, fps=fps)
 
 
-__all__ = ["caption", "execution_frames", "run_animation", "trajectory_figure", "write_gif"]
+__all__ = ["MARKER_LEGEND", "caption", "execution_frames", "run_animation", "trajectory_figure", "write_gif"]

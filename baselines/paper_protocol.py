@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import sparse
@@ -298,13 +298,15 @@ def evaluate_paper(
     policy_agents: Optional[Sequence[int]] = None,
     factors: Sequence[float] = PAPER_C_MAX_FACTORS,
     candidates: int = 1000,
+    on_row: Optional[Callable[[Dict[str, Any]], None]] = None,
 ) -> List[Dict[str, Any]]:
     """Every method on the same paper-protocol problems; ``ours`` once per c_max of the grid.
 
     One row per (method, c_max, agents, difficulty, problem), with the fields of
     :data:`~baselines.evaluation.ROW_FIELDS` (``collisions`` is 0: agents pass through each
     other; ``planning_time`` is not measured). ``policy_agents`` restricts the methods without
-    search to these agent counts (the paper: 1).
+    search to these agent counts (the paper: 1). ``on_row(row)`` is called after each run (e.g. to
+    write rows as they come).
     """
     import safe_mapf_envs
 
@@ -343,6 +345,8 @@ def evaluate_paper(
                 "collisions": 0, "steps": ex.steps, "planning_time": 0.0, "plan_status": ex.plan_status,
                 "reached": int(ex.reached.sum()), "c_max": m.c_max if m.search else math.inf,
             })
+            if on_row is not None:
+                on_row(rows[-1])
             if bar is not None:
                 bar.update(1)
     finally:

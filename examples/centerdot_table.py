@@ -29,13 +29,25 @@ from baselines.methods import METHODS
 from baselines.paper_tables import TABLE1, TABLE1_METHODS
 
 
+def run_files(folder: Path) -> List[Path]:
+    """The ``runs.csv`` of an evaluation folder, or those of its subfolders (one per agent count,
+    as ``examples/table1/centerdot_strict`` holds them); ``ValueError`` naming the folder if none."""
+    if (folder / "runs.csv").is_file():
+        return [folder / "runs.csv"]
+    found = sorted(folder.glob("*/runs.csv"))
+    if not found:
+        raise ValueError(f"{folder}: no runs.csv in it or in its subfolders (the output of safe-mapf evaluate)")
+    return found
+
+
 def load(*folders: Path) -> Dict[Tuple[str, int, str], dict]:
     """Aggregate the rows of ``safe-mapf evaluate`` folders by (difficulty, agents, method). Under
     the paper's protocol only the rows of the c_max chosen per cell are kept."""
     rows: List[dict] = []
     for folder in folders:
-        with open(folder / "runs.csv", newline="") as f:
-            rows += list(csv.DictReader(f))
+        for path in run_files(folder):
+            with open(path, newline="") as f:
+                rows += list(csv.DictReader(f))
     folder = folders[0]
     if (folder / "c_max.json").exists() and any(r["method"] == "ours" and r["c_max"] != "inf" for r in rows):
         meta = json.loads((folder / "c_max.json").read_text())
@@ -58,9 +70,13 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("paper_folder", type=Path, help="output of safe-mapf evaluate --protocol paper")
     p.add_argument("strict_folders", type=Path, nargs="+",
-                   help="output of safe-mapf evaluate (the strict protocol): one folder, or one per agent count")
+                   help="output of safe-mapf evaluate (the strict protocol): one folder (its runs.csv, or one "
+                        "per subfolder), or one folder per agent count")
     args = p.parse_args()
-    paper_runs, strict = load(args.paper_folder), load(*args.strict_folders)
+    try:
+        paper_runs, strict = load(args.paper_folder), load(*args.strict_folders)
+    except ValueError as exc:
+        p.error(str(exc))
     labels = [METHODS[m].label for m in TABLE1_METHODS]
     lines = ["| Problem | Agents | " + " | ".join(labels) + " |", "|---|---|" + "---|" * len(labels)]
     within: List[str] = []

@@ -1,18 +1,22 @@
-"""Write a top-down picture of every registered 2D map to ``examples/figures/maps/``.
+"""Write a top-down picture of every registered 2D map (default: to ``figures_out/maps/``).
 
-Run: ``python examples/make_map_figures.py``
+    python examples/make_map_figures.py                    # figures_out/maps/
+    python examples/make_map_figures.py --refresh-readme   # examples/figures/maps/, the README's
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import cv2
 import gymnasium as gym
 
 import safe_mapf_envs
+from baselines.output import add_figure_output_arguments, figure_output_dir
 
 
-def main(out_dir: Path = Path(__file__).parent / "figures" / "maps") -> None:
+def main(out_dir: Path) -> None:
+    """One 192 x 192 PNG per 2D map in ``out_dir`` (the env's first seeded reset drawn)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for spec in safe_mapf_envs.ENV_SPECS:
         if spec.obs_type != "vector":
@@ -27,4 +31,7 @@ def main(out_dir: Path = Path(__file__).parent / "figures" / "maps") -> None:
 
 
 if __name__ == "__main__":
-    main()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_figure_output_arguments(parser)
+    args = parser.parse_args()
+    main(figure_output_dir(args, Path(__file__).parent / "figures") / "maps")

@@ -4,7 +4,7 @@ the RGB-D panoramas the agent sees along it.
 The agent is driven by a scripted controller that descends the ground-truth geodesic distance
 to the goal (for illustration only: learned agents see the images alone).
 
-Run: ``python examples/panorama_contact_sheet.py [--env SafeApartment0-v0] [--out PATH]``
+Run: ``python examples/panorama_contact_sheet.py [--env SafeApartment0-v0] [--out DIR | --refresh-readme]``
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 import safe_mapf_envs
+from baselines.output import add_figure_output_arguments, figure_output_dir
 from safe_mapf_envs.sensors import VIEW_NAMES, scene_for_layout
 
 
@@ -35,7 +36,7 @@ class Settings:
     """panoramas shown along the trajectory"""
     max_steps: int = 120
     """step limit of the scripted episode"""
-    out: Path = Path(__file__).parent / "figures" / "panorama_contact_sheet.png"
+    out: Path = Path("figures_out") / "panorama_contact_sheet.png"
     """PNG to write"""
 
 
@@ -152,13 +153,13 @@ def main() -> None:
     p.add_argument("--start", type=float, nargs=2, default=cfg.start)
     p.add_argument("--goal", type=float, nargs=2, default=cfg.goal)
     p.add_argument("--frames", type=int, default=cfg.frames)
-    p.add_argument("--out", type=Path, default=cfg.out)
+    add_figure_output_arguments(p)
     args = p.parse_args()
-    cfg = Settings(env=args.env, start=tuple(args.start), goal=tuple(args.goal), frames=args.frames, out=args.out)
+    out = figure_output_dir(args, Path(__file__).parent / "figures") / cfg.out.name
+    cfg = Settings(env=args.env, start=tuple(args.start), goal=tuple(args.goal), frames=args.frames, out=out)
     if args.env not in {s.id for s in safe_mapf_envs.ENV_SPECS if s.obs_type == "panorama"}:
         raise ValueError(f"--env must be a registered visual id, got {args.env!r}")
     img = contact_sheet(cfg)
-    cfg.out.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(cfg.out), cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 9])
     print(cfg.out)
 

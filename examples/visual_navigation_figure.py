@@ -8,7 +8,8 @@ Ours runs as in the Table II runs: its cost cut-off is the one chosen on validat
 5; ``--c-max`` overrides) and a leg on which the constrained policy is stuck is handed to the
 unconstrained one (``--no-fallback`` turns that off).
 
-Writes two PNGs (default ``examples/figures/``):
+Writes two PNGs to ``--out`` (default ``figures_out/``; ``--refresh-readme``: ``examples/figures/``,
+the README's):
 
 - ``visual_navigation.png``: one agent planned and driven by our method (constrained search on
   the buffer graph of panoramas): the plan view with the executed path and the waypoints over
@@ -36,6 +37,7 @@ from agents import load_pretrained  # noqa: E402
 from baselines.evaluation import EvaluationSetup, make_problems  # noqa: E402
 from baselines.figures import trajectory_figure  # noqa: E402
 from baselines.methods import METHODS, Method, execute  # noqa: E402
+from baselines.output import add_figure_output_arguments, figure_output_dir  # noqa: E402
 
 HERE = Path(__file__).parent
 
@@ -106,14 +108,15 @@ def navigation_figure(setup: EvaluationSetup, difficulty: str, seed: int, path: 
     for x0, y0, x1, y1 in field.boxes:
         ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.25"))
     ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:blue", lw=2, label="executed path")
-    ax.plot(wp_pos[:, 0], wp_pos[:, 1], "X", color="tab:orange", ms=10, mec="k", label="waypoints")
+    # the markers of the trajectory figure and the GIFs (baselines.figures.MARKER_LEGEND)
+    ax.plot(wp_pos[:, 0], wp_pos[:, 1], "D", color="tab:orange", ms=8, mec="k", label="waypoints")
     for i, p in enumerate(wp_pos):
         ax.annotate(str(i + 1), p, textcoords="offset points", xytext=(6, 6), fontsize=10, weight="bold")
     for t, p in zip(steps, traj[steps]):
         ax.plot(*p, "o", color="white", ms=5, mec="tab:blue")
         ax.annotate(f"t={t}", p, textcoords="offset points", xytext=(4, -12), fontsize=7, color="tab:blue")
     ax.plot(*prob.starts[0], "o", color="tab:green", ms=11, mec="k", label="start")
-    ax.plot(*prob.goals[0], "*", color="tab:red", ms=17, mec="k", label="goal")
+    ax.plot(*prob.goals[0], "x", color="tab:red", ms=14, mew=3.5, label="goal")
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)  # row 0 at the top, as the map and the renderer draw it
     ax.set_aspect("equal")
@@ -146,22 +149,23 @@ def main() -> None:
     p.add_argument("--difficulty", default="medium", choices=["easy", "medium", "hard"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--nodes", type=int, default=1000)
-    p.add_argument("--out", type=Path, default=HERE / "figures")
+    add_figure_output_arguments(p)
     p.add_argument("--c-max", type=float, default=None,
                    help="ours' cost cut-off (default: examples/table2/apt<k>/c_max.json, else the method's)")
     p.add_argument("--no-fallback", dest="fallback", action="store_false",
                    help="no unconstrained fallback for a stuck leg of ours")
     args = p.parse_args()
+    out = figure_output_dir(args, HERE / "figures")
     chosen = chosen_c_max(args.env)
     single = args.c_max if args.c_max is not None else chosen.get(1)
     multi = args.c_max if args.c_max is not None else chosen.get(5)
     torch.set_num_threads(1)
     models = {k: load_pretrained(args.env, k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models)
-    print(navigation_figure(setup, args.difficulty, args.seed, args.out / "visual_navigation.png",
+    print(navigation_figure(setup, args.difficulty, args.seed, out / "visual_navigation.png",
                             ours_method(single, args.fallback)))
     print(trajectory_figure(setup, [METHODS["sorb"], ours_method(multi, args.fallback)],
-                            args.out / "visual_multi_agent.png",
+                            out / "visual_multi_agent.png",
                             agent_counts=(4,), difficulty=args.difficulty, seed=args.seed, problems=(0,)))
 
 

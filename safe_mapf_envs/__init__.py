@@ -17,17 +17,33 @@ Importing the package registers the Gymnasium ids listed in
     # N agents on the same map (PettingZoo; ``env``/``raw_env`` give the AEC form)
     par = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=10)
 
+    # one Box per observation (observation and goal concatenated), for SuperSuit and MlpPolicy
+    flat = gym.make("SafeCentralObstacle-v0", observation_format="flat")
+
+    # 64 episodes stepped in one batch (the same episodes as vectorization_mode="sync")
+    vec = gym.make_vec("SafeCentralObstacle-v0", num_envs=64, vectorization_mode="vector_entry_point")
+
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
+from importlib import metadata as _metadata
+
 from .base import NavigationEnvBase
 from .cost import COST_FUNCTIONS, ObstacleField
+from .formats import OBSERVATION_FORMATS, flat_space, flatten_observation
 from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
 from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
 from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
 from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout
 from .single_agent import SafeNavigationEnv
+from .vector import SafeNavigationVectorEnv
 from .wrappers import SafetyGymnasiumStyle
+
+try:
+    #: The installed distribution's version (``safe-mapf``), shared by ``agents`` and ``baselines``.
+    __version__ = _metadata.version("safe-mapf")
+except _metadata.PackageNotFoundError:  # run from a source tree that was never installed
+    __version__ = "0+unknown"
 
 register_envs()
 
@@ -41,16 +57,21 @@ __all__ = [
     "EnvSpec",
     "GridMap",
     "MAPS",
+    "OBSERVATION_FORMATS",
     "NavigationEnvBase",
     "NavigationScenario",
     "ObstacleField",
     "PanoramaSensor",
     "SafeMultiNavigationEnv",
     "SafeNavigationEnv",
+    "SafeNavigationVectorEnv",
     "SafetyGymnasiumStyle",
+    "__version__",
     "Scene",
     "env_spec",
     "env",
+    "flat_space",
+    "flatten_observation",
     "get_map",
     "multi",
     "parallel_env",

@@ -14,13 +14,14 @@ ignored with a ``UserWarning`` that names them (see
 """
 from __future__ import annotations
 
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import gymnasium
 import numpy as np
 
-from .checks import check_band, check_count, check_number, check_render_mode, show
+from .checks import check_count, check_goal_distance, check_number, check_render_mode, show
 from .cost import ObstacleField
+from .formats import check_observation_format
 from .rendering import HumanWindow, TopDownRenderer
 from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, scene_for_layout
@@ -58,12 +59,14 @@ class NavigationEnvBase:
         action_noise: float,
         substeps: int,
         max_start_cost: Optional[float],
-        goal_distance: Optional[Tuple[float, float]],
+        goal_distance: Union[None, str, Tuple[float, float]],
         action_scale: float,
         sensor_kwargs: Optional[Dict[str, Any]],
+        observation_format: str = "dict",
     ) -> None:
         """Check the shared constructor arguments and build the scenario and sensor."""
         self.render_mode = check_render_mode(render_mode, RENDER_MODES)
+        self.observation_format = check_observation_format(observation_format)
         if obs_type not in self.obs_types:
             raise ValueError(
                 f"obs_type must be one of {list(self.obs_types)} for {type(self).__name__}, got {show(obs_type)}"
@@ -74,9 +77,7 @@ class NavigationEnvBase:
         self.goal_threshold = check_number(goal_threshold, "goal_threshold", strict=True)
         self.action_scale = check_number(action_scale, "action_scale", strict=True)
         self.max_start_cost = None if max_start_cost is None else check_number(max_start_cost, "max_start_cost")
-        if goal_distance is not None:
-            check_band(goal_distance)
-        self.goal_distance = goal_distance
+        self.goal_distance = check_goal_distance(goal_distance)
         self.scenario = NavigationScenario(
             layout, agent_radius=agent_radius, cost_radius=cost_radius, cost_fn=cost_fn, boundary_cost=boundary_cost
         )
@@ -88,7 +89,7 @@ class NavigationEnvBase:
         self._window: Optional[HumanWindow] = None
 
     def _open_window(self) -> None:
-        """Open the window of the ``human`` render mode (``RuntimeError`` without a display)."""
+        """Open the window of the ``human`` render mode (it warns and shows nothing without a display)."""
         if self.render_mode == "human" and self._window is None:
             self._window = HumanWindow(type(self).__name__)
 

@@ -72,6 +72,19 @@ def check_band(band: Any, name: str = "goal_distance") -> Tuple[float, float]:
     return lo, hi
 
 
+#: The ``goal_distance`` value that asks for goals anywhere in the free space.
+UNIFORM_GOALS = "uniform"
+
+
+def check_goal_distance(value: Any) -> Union[None, str, Tuple[float, float]]:
+    """A ``goal_distance`` setting: ``None`` (the environment's default), ``"uniform"`` or a band."""
+    if value is None or (isinstance(value, str) and value == UNIFORM_GOALS):
+        return value
+    if isinstance(value, str):
+        raise ValueError(f"goal_distance must be None, {UNIFORM_GOALS!r} or a (lo, hi) band, got {value!r}")
+    return check_band(value)
+
+
 def check_action(action: Any, shape: Tuple[int, ...] = (2,)) -> np.ndarray:
     """Return ``action`` as a float64 array.
 

@@ -28,7 +28,16 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from .base import RENDER_MODES, NavigationEnvBase
-from .checks import check_action, check_count, check_number, parse_reset_options, plural, show
+from .checks import (
+    check_action,
+    check_count,
+    check_goal_distance,
+    check_number,
+    parse_reset_options,
+    plural,
+    show,
+)
+from .formats import flat_space, flatten_agents
 from .registration import env_spec
 from .scenario import RANDOM_FILL
 from .world import World
@@ -77,8 +86,13 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
       divided by the world size, nearest first; rows beyond the ``n_agents - 1`` other agents
       are zero.
 
-    All are ``float32``. :meth:`state` is the global view: every agent's normalised position
-    then every goal, flattened (``state_space``: ``Box(0, 1, (4 * n_agents,), float32)``).
+    All are ``float32``. With ``observation_format="flat"`` each agent's observation is one
+    ``Box`` (for SuperSuit's wrappers and SB3's ``MlpPolicy``/``CnnPolicy``, see
+    :mod:`safe_mapf_envs.formats`): ``[observation, desired_goal, neighbors]`` flattened
+    (``float32``), or for panoramas the channel-first ``uint8`` image ``(4, 2S, 4S)``; the Dict
+    spaces stay available as :attr:`goal_observation_spaces`. :meth:`state` is the global view:
+    every agent's normalised position then every goal, flattened (``state_space``:
+    ``Box(0, 1, (4 * n_agents,), float32)``).
     Subclasses provide other observation types (``obs_type``) by overriding
     :meth:`_make_observation_space` and :meth:`_observe`.
 
@@ -89,7 +103,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
     rendered once per episode without agents.
 
     ## Rewards
-    ``-1`` per step for every agent that acted (Search on the Replay Buffer convention).
+    For every agent that acted: ``0`` on the step that reaches its goal, ``-1`` otherwise, as in
+    the single-agent env (the Gymnasium-Robotics sparse convention).
 
     ## Costs
     ``infos[agent]["cost"]``: the obstacle cost exactly as in the single-agent environment
@@ -111,7 +126,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
       env) and no two starts (or goals) closer than ``2 * agent_radius``; otherwise
       ``ValueError`` names the agent;
     - ``{"goal_distance": (lo, hi)}`` to sample each goal at a ground-truth geodesic distance
-      from its agent's start within the band.
+      from its agent's start within the band (``"uniform"``: anywhere, the default here, since
+      the default ``max_cycles`` of 300 steps reaches across every registered map).
 
     Other keys are ignored with a ``UserWarning`` that names them, as in the single-agent env
     (PettingZoo's API test passes a key of its own). ``max_start_cost`` is a constructor
@@ -152,13 +168,14 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
       and ``n_agents`` is not bounded by the map's area;
     - ``observe_neighbors`` (0): adds the ``neighbors`` key with this many nearest agents;
     - ``obs_type`` ("vector" or "panorama"): the observation type (see :attr:`obs_types`);
+    - ``observation_format`` ("dict" or "flat"): see Observation Space;
     - ``action_scale`` (1.0): world units per unit of action; ``sensor_kwargs`` (None): camera
       settings for panoramas (see :class:`~safe_mapf_envs.sensors.PanoramaSensor`).
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, every agent
     in its own colour with its goal and trail, parked agents ringed, collision markers and
     the planned waypoints of :meth:`set_waypoints`; ``"human"`` shows it in a matplotlib
-    window and needs a display (``RuntimeError`` otherwise).
+    window and needs a display (without one it warns and shows nothing).
 
     Helpers shared with the single-agent env (see :class:`~safe_mapf_envs.base.NavigationEnvBase`):
     :meth:`sample_states`, :meth:`geodesic_distance`, :meth:`observations_at`, :meth:`normalize`.
@@ -190,13 +207,14 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         action_noise: float = 0.0,
         substeps: int = 4,
         max_start_cost: Optional[float] = None,
-        goal_distance: Optional[Tuple[float, float]] = None,
+        goal_distance: Union[None, str, Tuple[float, float]] = None,
         min_separation: Optional[float] = None,
         collision_cost: float = 0.0,
         agent_collisions: bool = True,
         observe_neighbors: int = 0,
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
+        observation_format: str = "dict",
     ) -> None:
         n_agents = check_count(n_agents, "n_agents", 1)
         self.max_cycles = check_count(max_cycles, "max_cycles", 1)
@@ -209,7 +227,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
             cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
             substeps=substeps, max_start_cost=max_start_cost, goal_distance=goal_distance, action_scale=action_scale,
-            sensor_kwargs=sensor_kwargs,
+            sensor_kwargs=sensor_kwargs, observation_format=observation_format,
         )
         radius = self.scenario.agent_radius
         if min_separation is None:
@@ -235,7 +253,11 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         self.agent_name_mapping: Dict[str, int] = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: List[str] = []
         self.action_spaces = {a: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self.possible_agents}
-        self.observation_spaces = {a: self._make_observation_space() for a in self.possible_agents}
+        #: Each agent's goal-conditioned Dict space (its observation space unless ``observation_format="flat"``).
+        self.goal_observation_spaces = {a: self._make_observation_space() for a in self.possible_agents}
+        self.observation_spaces: Dict[str, spaces.Space] = dict(self.goal_observation_spaces)
+        if self.observation_format == "flat":
+            self.observation_spaces = {a: flat_space(sp) for a, sp in self.goal_observation_spaces.items()}
         self.state_space = spaces.Box(0.0, 1.0, shape=(4 * n_agents,), dtype=np.float32)
 
         self.np_random, self.np_random_seed = seeding.np_random()
@@ -439,6 +461,11 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             for name, b, k in zip(names, buf, nb)
         }
 
+    def _formatted(self, idx: np.ndarray) -> Dict[str, Any]:
+        """:meth:`_observe`, flattened with ``observation_format="flat"``."""
+        obs = self._observe(idx)
+        return flatten_agents(obs) if self.observation_format == "flat" else obs
+
     def _neighbors(self, idx: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Normalised offsets to the ``observe_neighbors`` nearest other agents, ``(len(idx), k, 2)``."""
         k = self.observe_neighbors
@@ -485,10 +512,10 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             starts = self._check_positions(options["starts"], "start")
         else:
             starts = self._sample_separated(rng, "start", max_cost=self.max_start_cost)
-        band = options.get("goal_distance", self.goal_distance)
+        band = check_goal_distance(options["goal_distance"]) if "goal_distance" in options else self.goal_distance
         if options.get("goals") is not None:
             goals = self._check_positions(options["goals"], "goal")
-        elif band is not None:
+        elif isinstance(band, tuple):  # a (lo, hi) band; None and "uniform" mean anywhere
             goals = self._sample_goals_in_band(starts, band, rng)
         else:
             goals = self._sample_separated(rng, "goal")
@@ -510,7 +537,7 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         idx = self._live_idx
         dist = np.sqrt(((starts - goals) ** 2).sum(-1))
         infos = self._infos(idx, sc.field.cost(starts), dist, np.zeros(n, np.int64), {})
-        return self._observe(idx), infos
+        return self._formatted(idx), infos
 
     def _parse_actions(self, actions) -> np.ndarray:
         """Actions of the live agents as an ``(n_live, 2)`` float64 array, validated."""
@@ -580,8 +607,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         reached = dist <= self.goal_threshold
         for i in idx[reached].tolist():
             self._world.park(i)
-        observations = self._observe(idx)
-        rewards = dict.fromkeys(names, -1.0)
+        observations = self._formatted(idx)
+        rewards = dict(zip(names, np.where(reached, 0.0, -1.0).tolist()))
         terminations = dict(zip(names, reached.tolist()))
         truncations = dict.fromkeys(names, truncated)
         if truncated or reached.any():

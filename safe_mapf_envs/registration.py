@@ -1,8 +1,10 @@
 """One table of environment ids, registered with Gymnasium on ``import safe_mapf_envs``."""
 from __future__ import annotations
 
+import difflib
+import importlib
 from dataclasses import dataclass, field
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Tuple
 
 import gymnasium as gym
 
@@ -22,6 +24,8 @@ class EnvSpec:
 
 
 _SINGLE = "safe_mapf_envs.single_agent:SafeNavigationEnv"
+#: ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` (vector ids)
+_VECTOR = "safe_mapf_envs.vector:SafeNavigationVectorEnv"
 
 #: Every registered id. Training ids use 20 steps per episode, as in the paper.
 ENV_SPECS: List[EnvSpec] = [
@@ -39,8 +43,22 @@ ENV_SPECS.append(EnvSpec("SafeCentralObstacleVisual-v0", _SINGLE, "CentralObstac
                          kwargs={"layout": "CentralObstacle", "obs_type": "panorama"}))
 
 
+def reachable_goal_band(spec: EnvSpec) -> Tuple[float, float]:
+    """``(0, max_episode_steps * action_scale)``: goals an agent can reach within the time limit.
+
+    The geodesic distance an agent covers moving at full speed (one ``action_scale`` per step)
+    along the shortest path; the registered single-agent ids sample their default goals in it.
+    """
+    return 0.0, float(spec.max_episode_steps) * float(spec.kwargs.get("action_scale", 1.0))
+
+
 def register_envs() -> None:
-    """Register every id in :data:`ENV_SPECS` (idempotent)."""
+    """Register every id in :data:`ENV_SPECS` (idempotent).
+
+    The Gymnasium registration adds ``goal_distance=``:func:`reachable_goal_band` to each id's
+    keyword arguments, so default episodes are solvable; :attr:`EnvSpec.kwargs` (which the
+    multi-agent factories inherit, with their 300-step episodes) do not carry it.
+    """
     for spec in ENV_SPECS:
         if spec.id in gym.registry:
             continue
@@ -48,8 +66,31 @@ def register_envs() -> None:
             id=spec.id,
             entry_point=spec.entry_point,
             max_episode_steps=spec.max_episode_steps,
-            kwargs=dict(spec.kwargs),
+            kwargs={"goal_distance": reachable_goal_band(spec), **spec.kwargs},
+            vector_entry_point=_VECTOR if spec.obs_type == "vector" else None,
         )
+
+
+def check_env_id(env_id: Any) -> str:
+    """``env_id`` if ``gymnasium.make`` knows it, else ``ValueError`` naming it and the ids of this package.
+
+    A ``"module:Id"`` prefix is imported first, as ``gymnasium.make`` does, so ids that another
+    package registers on import pass too. Commands call this before any work.
+    """
+    if not isinstance(env_id, str) or not env_id:
+        raise ValueError(f"an env id must be a non-empty string, got {env_id!r}")
+    module, _, name = env_id.rpartition(":")
+    if module:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ValueError(f"env id {env_id!r}: cannot import module {module!r} ({exc})") from None
+    if name not in gym.registry:
+        ours = [s.id for s in ENV_SPECS]
+        close = difflib.get_close_matches(name, ours, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown env id {env_id!r}{hint}; this package registers: {', '.join(ours)}")
+    return env_id
 
 
 def env_spec(env_id: str) -> EnvSpec:
@@ -61,4 +102,4 @@ def env_spec(env_id: str) -> EnvSpec:
     raise KeyError(f"unknown env id {env_id!r}; registered: {', '.join(s.id for s in ENV_SPECS)}")
 
 
-__all__ = ["ENV_SPECS", "EnvSpec", "env_spec", "register_envs"]
+__all__ = ["ENV_SPECS", "EnvSpec", "check_env_id", "env_spec", "reachable_goal_band", "register_envs"]

@@ -5,6 +5,7 @@ frame; agents, goals, trails, planned waypoints and collision markers are drawn 
 """
 from __future__ import annotations
 
+import warnings
 from typing import Any, Optional, Sequence, Tuple, Union
 
 import cv2
@@ -130,14 +131,19 @@ class HumanWindow:
     """Shows frames in a matplotlib window (``render_mode="human"``).
 
     OpenCV's headless build has no windows, so the human mode draws through matplotlib. It
-    needs a display: constructing it without one raises ``RuntimeError`` naming the problem.
+    needs a display: without one (no ``DISPLAY``/``WAYLAND_DISPLAY``) the window warns once,
+    naming the problem, and shows nothing, so that generic tools which try every render mode
+    (Gymnasium's ``check_env``) run on headless machines.
     """
 
     def __init__(self, title: str) -> None:
         import os
 
-        if os.name != "nt" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-            raise RuntimeError('render_mode="human" needs a display (DISPLAY is not set); use "rgb_array"')
+        self.headless = os.name != "nt" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+        if self.headless:
+            warnings.warn('render_mode="human" needs a display (DISPLAY is not set): frames are not shown; '
+                          'use "rgb_array" to get them as images', UserWarning, stacklevel=4)
+            return
         import matplotlib.pyplot as plt
 
         plt.ion()
@@ -152,6 +158,8 @@ class HumanWindow:
         self._im: Any = None  # the AxesImage, made on the first frame
 
     def show(self, frame: np.ndarray) -> None:
+        if self.headless:
+            return
         if self._im is None:
             self._im = self._ax.imshow(frame)
         else:
@@ -160,7 +168,8 @@ class HumanWindow:
         self._plt.pause(0.001)
 
     def close(self) -> None:
-        self._plt.close(self._fig)
+        if not self.headless:
+            self._plt.close(self._fig)
 
 
 __all__ = ["HumanWindow", "PALETTE", "TopDownRenderer", "agent_colour"]

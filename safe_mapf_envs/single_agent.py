@@ -8,7 +8,8 @@ import numpy as np
 from gymnasium import spaces
 
 from .base import RENDER_MODES, NavigationEnvBase
-from .checks import check_action, parse_reset_options
+from .checks import check_action, check_goal_distance, parse_reset_options
+from .formats import flat_space, flatten_observation
 from .world import World
 
 _RESET_OPTIONS = ("start", "goal", "goal_distance")
@@ -47,6 +48,13 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     All are ``float32``. Ground-truth positions in world units are in ``info["position"]`` and
     ``info["goal"]`` (for evaluation, never meant as policy input).
 
+    With ``observation_format="flat"`` the observation is one ``Box`` instead (for SB3's
+    ``MlpPolicy``/``CnnPolicy`` and tools that take no ``Dict``, see
+    :mod:`safe_mapf_envs.formats`): ``[observation, desired_goal]`` (``float32``, 4 values) for
+    vectors, and for panoramas the channel-first ``uint8`` image ``(4, 2S, 4S)`` with the
+    agent's four views on top and the goal's below. The Dict space stays available as
+    :attr:`goal_observation_space`; :meth:`compute_reward` and friends take its goals.
+
     With ``obs_type="panorama"`` (the ``SafeApartment*`` ids) the three keys are images
     instead: ``Box(0, 255, (4, S, S, 4), uint8)``, the views north, east, south and west
     (``-y``, ``+x``, ``+y``, ``-x``), each ``S x S`` (32) pixels with channels R, G, B and depth
@@ -59,9 +67,17 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     ``camera_height``, ``max_range``).
 
     ## Rewards
-    ``-1`` on every step (Search on the Replay Buffer convention), so a value function counts
-    the steps to the goal. :meth:`compute_reward` returns the same for any goal, vectors or
-    images.
+    ``-1`` on every step that ends away from the goal and ``0`` on the step that reaches it
+    (the Gymnasium-Robotics sparse convention, ``-(not terminated)``). :meth:`compute_reward`
+    computes the same from ``(achieved_goal, desired_goal)``, on single goals or batches, so
+    SB3's ``HerReplayBuffer`` sees a relabelled transition that reaches its new goal as one
+    (it does not relabel ``dones``; a goal-reaching transition is told apart by its reward).
+    An episode of ``T`` steps that reaches the goal has the return ``-(T - 1)``.
+
+    The distance critics of :class:`~agents.SafeGoalTD3` do not read this reward: they count
+    the steps to the goal themselves (one per step, the goal-reaching step included, from the
+    termination that their replay buffer recomputes for every relabelled goal), as Search on the
+    Replay Buffer does.
 
     ## Costs
     ``info["cost"]`` is the largest cost over the positions of the step's sub-steps:
@@ -69,14 +85,23 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     with ``h`` the exact distance from the agent's centre to the nearest obstacle boundary
     and ``r`` = ``cost_radius``. ``"cosine"`` and ``"constant"`` profiles are available. The
     outer boundary confines the agent but costs nothing unless ``boundary_cost=True``.
+    :meth:`compute_cost` gives the cost at the position of an achieved goal (vector
+    observations only), for cost relabelling: it does not depend on the goal, and it is the
+    cost of the step's last sub-step, so at most the step's ``info["cost"]``.
 
     ## Starting State
-    Start and goal are sampled uniformly in the free space (positions whose distance to every
-    obstacle is at least the agent radius). ``reset(options=...)`` accepts:
+    The start is sampled uniformly in the free space (positions whose distance to every
+    obstacle is at least the agent radius). The registered ids sample the goal **within reach
+    of their time limit**: ``goal_distance=(0, 20 * action_scale)``, a ground-truth geodesic
+    distance from the start of at most 20 units (5 m on the apartments), the distance an
+    agent moving at full speed along the shortest path covers in the 20 steps of an episode.
+    Pass ``goal_distance="uniform"`` for goals anywhere in the free space (the class's own
+    default), or a ``(lo, hi)`` band; with a longer ``max_episode_steps``, widen the band to
+    match (it is not read from the time limit). ``reset(options=...)`` accepts:
 
     - ``{"start": (x, y), "goal": (x, y)}`` to pin a problem (world units; either key alone works);
-    - ``{"goal_distance": (lo, hi)}`` to sample a goal whose ground-truth geodesic distance from
-      the start lies in the band.
+    - ``{"goal_distance": (lo, hi)}`` (or ``"uniform"``) for this episode's goal, as the
+      constructor argument.
 
     Other keys are ignored with a ``UserWarning`` that names them, in both the single- and
     the multi-agent env (generic tools such as PettingZoo's API test pass keys of their own).
@@ -92,8 +117,8 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     goals it is given: with vector goals it applies the same ``goal_threshold`` rule; with
     image goals it cannot recover positions, so it returns ``True`` exactly where the two
     panoramas are identical pixel for pixel (a relabelled goal that is the achieved panorama
-    itself). Near the goal, ``step`` may terminate while the images still differ; use
-    ``info["is_success"]`` to evaluate.
+    itself). Near the goal, ``step`` may terminate (with reward 0) while the images still
+    differ, where :meth:`compute_reward` gives -1; use ``info["is_success"]`` to evaluate.
 
     ## Arguments
     ``gymnasium.make("SafeCentralObstacle-v0", render_mode=None, **kwargs)`` with kwargs:
@@ -103,7 +128,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
       ``cost_fn`` ("linear"), ``boundary_cost`` (False);
     - ``goal_threshold`` (1.0), ``action_noise`` (0.0, std of Gaussian noise on the action),
       ``substeps`` (4);
-    - ``max_start_cost`` (None), ``goal_distance`` (None: default band for sampled goals);
+    - ``max_start_cost`` (None), ``goal_distance`` (``None`` or ``"uniform"``: goals anywhere;
+      a ``(lo, hi)`` geodesic band; the registered ids set ``(0, 20 * action_scale)``, see
+      Starting State);
+    - ``observation_format`` ("dict" or "flat", see Observation Space);
     - ``obs_type`` ("vector" or "panorama"), ``action_scale`` (1.0; world units per unit of
       action), ``sensor_kwargs`` (None: :class:`~safe_mapf_envs.sensors.PanoramaSensor`
       arguments for panoramas).
@@ -115,7 +143,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
 
     ``render_mode="rgb_array"`` returns a top-down image with the cost heat map, obstacles,
     agent, goal, trail and planned waypoints (see :meth:`set_waypoints`); ``"human"`` shows it
-    in a matplotlib window and needs a display (``RuntimeError`` otherwise).
+    in a matplotlib window and needs a display (without one it warns and shows nothing).
 
     Helpers for evaluation and planning (shared with the multi-agent env, see
     :class:`~safe_mapf_envs.base.NavigationEnvBase`): :meth:`sample_states`,
@@ -143,16 +171,17 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         action_noise: float = 0.0,
         substeps: int = 4,
         max_start_cost: Optional[float] = None,
-        goal_distance: Optional[Tuple[float, float]] = None,
+        goal_distance: Union[None, str, Tuple[float, float]] = None,
         obs_type: str = "vector",
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
+        observation_format: str = "dict",
     ) -> None:
         self._setup(
             layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
             cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
             substeps=substeps, max_start_cost=max_start_cost, goal_distance=goal_distance, action_scale=action_scale,
-            sensor_kwargs=sensor_kwargs,
+            sensor_kwargs=sensor_kwargs, observation_format=observation_format,
         )
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         pos_space: spaces.Box
@@ -162,9 +191,13 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             pos_space = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
         self._goal_ndim = len(pos_space.shape)
         self._goal_image = np.zeros(0, dtype=np.uint8)
-        self.observation_space = spaces.Dict(
+        #: The goal-conditioned Dict space (the observation space unless ``observation_format="flat"``).
+        self.goal_observation_space = spaces.Dict(
             {"observation": pos_space, "achieved_goal": pos_space, "desired_goal": pos_space}
         )
+        self.observation_space: spaces.Space = self.goal_observation_space
+        if self.observation_format == "flat":
+            self.observation_space = flat_space(self.goal_observation_space)
         self._world: Optional[World] = None
         self._pos = np.zeros(2)
         self._goal = np.zeros(2)
@@ -188,12 +221,14 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         """Planned waypoints (world units, ``(K, 2)``) to draw in rendered frames; ``None`` clears them."""
         self._waypoints = None if waypoints is None else np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
 
-    def _obs(self) -> Dict[str, np.ndarray]:
+    def _obs(self) -> Union[Dict[str, np.ndarray], np.ndarray]:
         if self.sensor is not None:
             img = self.sensor.render(self._pos)
-            return {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
-        p = self.normalize(self._pos)
-        return {"observation": p, "achieved_goal": p.copy(), "desired_goal": self.normalize(self._goal)}
+            obs = {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
+        else:
+            p = self.normalize(self._pos)
+            obs = {"observation": p, "achieved_goal": p.copy(), "desired_goal": self.normalize(self._goal)}
+        return flatten_observation(obs) if self.observation_format == "flat" else obs
 
     def _info(self, cost: float) -> Dict[str, Any]:
         dist = float(np.linalg.norm(self._pos - self._goal))
@@ -205,24 +240,33 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             "is_success": dist <= self.goal_threshold,
         }
 
+    def draw_problem(self, rng: np.random.Generator, options: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
+        """The ``(start, goal)`` of an episode (world units) from ``rng`` and parsed reset ``options``.
+
+        What :meth:`reset` draws, in the same order from the same generator (the native vector
+        env draws each sub-env's problems with it too).
+        """
+        sc = self.scenario
+        if options.get("start") is not None:
+            start = sc.check_position(options["start"], "start")
+        else:
+            start = sc.sample_states(1, rng, max_cost=self.max_start_cost)[0]
+        band = check_goal_distance(options["goal_distance"]) if "goal_distance" in options else self.goal_distance
+        if options.get("goal") is not None:
+            goal = sc.check_position(options["goal"], "goal")
+        elif isinstance(band, tuple):  # a (lo, hi) band; None and "uniform" mean anywhere
+            goal = sc.sample_goal_in_band(start, band, rng)
+        else:
+            goal = sc.sample_states(1, rng)[0]
+        return start, goal
+
     # ----------------------------------------------------------------- gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
         """Start an episode; see Starting State in the class docstring for ``options``."""
         super().reset(seed=seed)
         options = parse_reset_options(options, _RESET_OPTIONS, type(self).__name__)
         sc = self.scenario
-        rng = self.np_random
-        if options.get("start") is not None:
-            start = sc.check_position(options["start"], "start")
-        else:
-            start = sc.sample_states(1, rng, max_cost=self.max_start_cost)[0]
-        band = options.get("goal_distance", self.goal_distance)
-        if options.get("goal") is not None:
-            goal = sc.check_position(options["goal"], "goal")
-        elif band is not None:
-            goal = sc.sample_goal_in_band(start, band, rng)
-        else:
-            goal = sc.sample_states(1, rng)[0]
+        start, goal = self.draw_problem(self.np_random, options)
         self._goal = goal
         if self.sensor is not None:
             self._goal_image = self.sensor.render(goal)
@@ -233,7 +277,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         return self._obs(), self._info(cost)
 
     def step(self, action):
-        """Move the agent by ``action``; returns ``(obs, -1.0, terminated, False, info)``."""
+        """Move the agent by ``action``; returns ``(obs, reward, terminated, False, info)``.
+
+        ``reward`` is ``0.0`` when the step reaches the goal (``terminated``), ``-1.0`` otherwise.
+        """
         if self._world is None:
             raise RuntimeError("call reset() before step()")
         a = check_action(action)
@@ -251,16 +298,38 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         terminated = bool(info["is_success"])
         if self.render_mode == "human":
             self.render()
-        return obs, -1.0, terminated, False, info
+        return obs, 0.0 if terminated else -1.0, terminated, False, info
 
     # ----------------------------------------------------------------- GoalEnv API
     def compute_reward(self, achieved_goal, desired_goal, info) -> Union[float, np.ndarray]:
-        """Reward for (batches of) achieved/desired goals: -1 everywhere, as returned by :meth:`step`."""
-        a = np.asarray(achieved_goal)
-        shape = a.shape[: a.ndim - self._goal_ndim]
-        if shape == ():
-            return -1.0
-        return -np.ones(shape, dtype=np.float32)
+        """``0`` where :meth:`compute_terminated` holds, ``-1`` elsewhere (single goals or batches).
+
+        The reward :meth:`step` returns for the same goals (with panoramas, see Episode End);
+        batches give ``float32`` arrays of the batch shape, as SB3's ``HerReplayBuffer`` expects.
+        """
+        done = self.compute_terminated(achieved_goal, desired_goal, info)
+        if isinstance(done, bool):
+            return 0.0 if done else -1.0
+        return done.astype(np.float32) - np.float32(1.0)
+
+    def compute_cost(self, achieved_goal, desired_goal, info) -> Union[float, np.ndarray]:
+        """The safety cost at the position of each achieved goal (vector observations only).
+
+        The cost of a state does not depend on the goal, so relabelled transitions keep it;
+        this recomputes it from the achieved goal alone (``desired_goal`` and ``info`` are
+        unused), for buffers that relabel costs too. It is the cost of the step's last sub-step,
+        at most the step's ``info["cost"]`` (the largest over its sub-steps). Panorama goals do
+        not give positions: ``ValueError``; read ``info["cost"]`` instead.
+        """
+        if self.sensor is not None:
+            raise ValueError(
+                "compute_cost needs positions, which panorama goals do not give; use the stored info['cost']"
+            )
+        a = np.asarray(achieved_goal, dtype=np.float64)
+        if a.shape[-1:] != (2,):
+            raise ValueError(f"compute_cost: achieved_goal must have shape (..., 2), got {a.shape}")
+        cost = self.scenario.field.cost(self.denormalize(np.clip(a, 0.0, 1.0)))
+        return float(cost) if cost.ndim == 0 else cost.astype(np.float32)
 
     def compute_terminated(self, achieved_goal, desired_goal, info) -> Union[bool, np.ndarray]:
         """``True`` where the achieved goal is within ``goal_threshold`` world units of the desired goal.

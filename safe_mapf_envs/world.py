@@ -146,6 +146,13 @@ class World:
         if self._batched:
             self._index_bodies()
 
+    def place(self, index: int, position: np.ndarray) -> None:
+        """Put agent ``index`` at ``position`` at rest (a new episode of one agent in a shared space)."""
+        body = self.bodies[index]
+        body.position = (float(position[0]), float(position[1]))
+        body.velocity = (0.0, 0.0)
+        self.space.reindex_shapes_for_body(body)
+
     def step(self, displacements: np.ndarray) -> Tuple[np.ndarray, Set[Tuple[int, int]]]:
         """Advance one environment step.
 

@@ -100,6 +100,28 @@ REACH_THRESHOLD = 2.0
 PANORAMA_REACH_THRESHOLD = 3.0
 
 
+def check_models(critic: Any, driver: Any) -> None:
+    """``ValueError`` unless ``critic`` can annotate a graph and ``driver`` is a model of the same env.
+
+    The critic needs ``pairwise`` distances and costs (a :class:`~agents.SafeGoalTD3`). Models
+    that name their env (``env_id``) must name the same one, and models with an observation
+    space must have the same.
+    """
+    if not callable(getattr(critic, "pairwise", None)):
+        raise ValueError(f"the critic must give pairwise distances and costs (a SafeGoalTD3 model); a "
+                         f"{type(critic).__name__} has no pairwise(): it can only drive, as driver= next to a "
+                         "SafeGoalTD3 critic (with distance_model=the critic to judge waypoints reached)")
+    if driver is None:
+        return
+    ids = [getattr(m, "env_id", None) for m in (critic, driver)]
+    if None not in ids and ids[0] != ids[1]:
+        raise ValueError(f"the critic was trained on {ids[0]} and the driver on {ids[1]}: both must be of one env")
+    spaces_ = [getattr(m, "observation_space", None) for m in (critic, driver)]
+    if None not in spaces_ and spaces_[0] != spaces_[1]:
+        raise ValueError(f"the critic and the driver observe different spaces ({spaces_[0]} and {spaces_[1]}): "
+                         "both must be models of one env")
+
+
 def _reads_images(model: Any) -> bool:
     """Whether ``model`` observes images (its observation space, or that space's ``observation`` entry)."""
     from gymnasium import spaces
@@ -294,6 +316,7 @@ class SearchPolicy:
                 ``proximity_radius``, ``suboptimality``, ``time_limit``, ...) and
                 :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
         """
+        check_models(critic, driver)
         planner_names, policy_names = _option_names(cls)
         unknown = set(options) - planner_names - policy_names
         if unknown:

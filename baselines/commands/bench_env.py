@@ -14,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "as they end, and the resets are timed too")
     p.add_argument("--agents", type=int, nargs="*", default=None,
                    help="time the PettingZoo parallel env with these agent counts instead")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the resets and the random actions")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=run)
 
@@ -82,12 +82,18 @@ def run(args: argparse.Namespace) -> int:
     Every row times exactly ``--steps`` environment steps (for each agent count of
     ``--agents``), resetting episodes as they end; the resets are part of the timing.
     """
+    import safe_mapf_envs
+    from safe_mapf_envs.registration import check_env_id
+
+    check_env_id(args.env_id)
     if args.steps < 1:
         raise ValueError(f"--steps must be >= 1, got {args.steps}")
     if args.agents:
         bad = [n for n in args.agents if n < 1]
         if bad:
             raise ValueError(f"--agents must be counts >= 1, got {bad}")
+        for n in args.agents:  # an id of this package and room for n agents, before timing anything
+            safe_mapf_envs.parallel_env(args.env_id, n_agents=n).close()
         rows = [bench_parallel(args.env_id, n, args.steps, args.seed) for n in args.agents]
     else:
         rows = [bench_single(args.env_id, args.steps, args.seed)]

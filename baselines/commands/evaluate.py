@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 
 
@@ -18,9 +19,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="unconstrained checkpoint (default: the shipped one for --env)")
     p.add_argument("--constrained", default=None, metavar="PATH",
                    help="constrained checkpoint (default: the shipped one for --env)")
-    p.add_argument("--agents", type=_positive, nargs="+", default=[1, 5, 10, 20], metavar="N", help="agent counts")
-    p.add_argument("--problems", type=_positive, default=50, metavar="P", help="problems per difficulty (default 50)")
-    p.add_argument("--difficulty", nargs="+", choices=list(DIFFICULTIES), default=list(DIFFICULTIES))
+    p.add_argument("--agents", type=_positive, nargs="+", default=list(SMALL_AGENTS), metavar="N",
+                   help="agent counts (default: 1 5, a small run; the paper's Table I: 1 5 10 20)")
+    p.add_argument("--problems", type=_positive, default=SMALL_PROBLEMS, metavar="P",
+                   help="problems per difficulty (default: 5, a small run; the paper's Table I: 50)")
+    p.add_argument("--difficulty", nargs="+", choices=list(DIFFICULTIES), default=list(DIFFICULTIES),
+                   help="difficulties to run")
     p.add_argument("--methods", nargs="+", choices=list(METHODS), default=None,
                    help=f"default: all (--protocol paper: the paper's four, {', '.join(PAPER_METHODS)})")
     p.add_argument("--seed", type=_non_negative, default=0, help="seed of the graph nodes and the problems")
@@ -70,7 +74,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video", action="store_true",
                    help="also write run.gif: the last search method's execution of the figure's multi-agent problem")
     p.add_argument("--json", action="store_true", help="print the aggregate rows as JSON instead of the table")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (it is drawn only when stderr is a terminal)")
     p.add_argument("--protocol", choices=("strict", "paper"), default="strict",
                    help="strict (default): the protocol above (problems on the graph, CBS with waiting and "
                         "proximity conflicts, closed-loop following, agents that collide). paper: the "
@@ -94,6 +99,39 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the running cluster (ray start --head); or a cluster address. Same rows as the serial "
                         "run for the same seed. Needs the ray extra: pip install \"safe-mapf[ray]\"")
     p.set_defaults(func=run)
+
+
+#: The defaults of a bare ``safe-mapf evaluate``: a small run of a minute or two.
+SMALL_AGENTS, SMALL_PROBLEMS = (1, 5), 5
+#: What the full Table I takes, as measured (README, "Measured").
+FULL_RUN_NOTE = ("the full Table I (--agents 1 5 10 20 --problems 50, the four methods of the paper) took "
+                 "1126 s serially, 580 s with --ray")
+
+
+def _check_before_work(args: argparse.Namespace):
+    """Agent counts that fit the map and the graph, and a writable ``--out``; returns the output folder."""
+    import safe_mapf_envs
+    from baselines.output import check_output_dir
+
+    too_many = [n for n in args.agents if n > args.nodes]
+    if too_many:
+        raise ValueError(f"--agents {max(too_many)}: more agents than graph nodes (--nodes {args.nodes}); every "
+                         "agent needs a start and a goal node of its own")
+    if args.protocol == "strict":  # agents collide: they must fit on the map side by side, apart
+        try:
+            env = safe_mapf_envs.parallel_env(args.env, n_agents=max(args.agents))
+            env.reset(seed=args.seed)  # places the starts and goals at the separation problems keep
+            env.close()
+        except ValueError as exc:
+            raise ValueError(f"--agents {max(args.agents)}: {exc}") from None
+    return check_output_dir(args.out)
+
+
+def _small_run_note(args: argparse.Namespace) -> str:
+    """A line for runs with the small default size, saying what the full table takes."""
+    if args.json or tuple(args.agents) != SMALL_AGENTS or args.problems != SMALL_PROBLEMS:
+        return ""
+    return f"a small run (the defaults: --agents 1 5 --problems 5); {FULL_RUN_NOTE}\n"
 
 
 def _c_max(text: str):
@@ -147,6 +185,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from baselines.anatomy import failure_records
+    from baselines.cli import show_progress
     from baselines.evaluation import (
         REPAIR_SEED_OFFSET,
         VALIDATION_SEED_OFFSET,
@@ -159,6 +198,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
     )
     from baselines.methods import METHODS, get_methods
+    from baselines.output import RowWriter
 
     repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
     if args.repair_problems and repair_seed == args.seed:
@@ -181,6 +221,9 @@ def run(args: argparse.Namespace) -> int:
     torch.set_num_threads(1)
     if args.protocol == "paper":
         return _run_paper(args)
+    if args.c_max == "auto" and args.c_max_from is None and not any(
+            m.search and math.isfinite(m.c_max) for m in get_methods(dict.fromkeys(args.methods or METHODS))):
+        raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
     chosen, validation_seed = None, None
     if args.c_max_from is not None:
         if args.c_max is not None:
@@ -194,6 +237,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.c_max_from} has no c_max for agent counts {missing} (it has {sorted(chosen)})")
         chosen = {k: chosen[k] for k in args.agents}
         validation_seed = meta.get("validation_seed")
+    out = _check_before_work(args)
+    print(_small_run_note(args), end="", file=sys.stderr, flush=True)
     methods = get_methods(dict.fromkeys(args.methods or METHODS))
     opts = {}
     if args.c_max is not None and args.c_max != "auto":
@@ -213,12 +258,9 @@ def run(args: argparse.Namespace) -> int:
               for k in ("unconstrained", "constrained")}
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
                                   sparsify=args.sparsify, max_edges=args.max_edges)
-    progress = not args.no_progress and not args.json
-    out = Path(args.out)
+    progress = show_progress(args.no_progress or args.json)
     if chosen is None and args.c_max == "auto":
-        constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]
-        if not constrained:
-            raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
+        constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]  # not empty: checked above
         vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
         sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
                            n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
@@ -235,16 +277,19 @@ def run(args: argparse.Namespace) -> int:
                                      seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
                                      progress=progress, policy_agents=args.policies_at, c_max_by_agents=chosen,
                                      ray=args.ray)
-        out.mkdir(parents=True, exist_ok=True)
         for name, memory in memories.items():
             memory.save(out / f"edge_memory_{name}.npz")
     failures: list = []
-    rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
-                    max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                    c_max_by_agents=chosen, ray=args.ray, memories=memories,
-                    on_run=lambda row, _prob, ex: failures.extend(failure_records(row, ex.failures)))
+
+    def keep(row, _problem, ex) -> None:
+        writer.write(row)
+        failures.extend(failure_records(row, ex.failures))
+
+    with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
+        rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
+                        max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
+                        c_max_by_agents=chosen, ray=args.ray, memories=memories, on_run=keep)
     agg = aggregate(rows)
-    write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
     (out / "table.json").write_text(json.dumps(agg, indent=1))
     anatomy = write_anatomy(rows, failures, out, title=args.env)
@@ -316,11 +361,12 @@ def write_anatomy(rows, failures, out, title: str = "") -> str:
 
 def _run_paper(args: argparse.Namespace) -> int:
     """``--protocol paper``: the published code's conventions (see :mod:`baselines.paper_protocol`)."""
-    from pathlib import Path
 
     from agents import load_pretrained
+    from baselines.cli import show_progress
     from baselines.evaluation import aggregate, markdown_table, write_csv
     from baselines.methods import get_methods
+    from baselines.output import RowWriter
     from baselines.paper_protocol import (
         PAPER_PROTOCOL_METHODS,
         PaperSetup,
@@ -350,17 +396,18 @@ def _run_paper(args: argparse.Namespace) -> int:
     if args.fallback:
         raise ValueError("--fallback does not apply to --protocol paper (its agents follow their plans open loop)")
     methods = get_methods(names)
+    out = _check_before_work(args)
+    print(_small_run_note(args), end="", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
     setup = PaperSetup.build(args.env, models, n_nodes=args.nodes, seed=args.seed)
-    progress = not args.no_progress and not args.json
-    rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
-                          max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                          candidates=args.paper_candidates)
+    progress = show_progress(args.no_progress or args.json)
+    with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
+        rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
+                              max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
+                              candidates=args.paper_candidates, on_row=writer.write)
     kept, chosen = choose_best_c_max(rows)
     agg = aggregate(kept)
-    out = Path(args.out)
-    write_csv(rows, out / "runs.csv")
     write_csv(agg, out / "table.csv")
     (out / "table.json").write_text(json.dumps(agg, indent=1))
     (out / "c_max.json").write_text(json.dumps(

@@ -7,25 +7,13 @@ import sys
 from typing import Any, Dict, List, Optional
 
 
-class _DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Appends "(default: X)" to an option's help only where it says something: not for flags
-    (``store_true``/``store_false``), not for a default of ``None`` and not where the help text
-    already states the default in words."""
-
-    def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
-        if action.nargs == 0 or action.default is None or "default" in text:
-            return text
-        return super()._get_help_string(action) or text
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.training import TrainConfig
 
     d = TrainConfig()
     p = sub.add_parser(
         "train", help="train the goal-conditioned safe agent (unconstrained or constrained stage)",
-        description=run.__doc__, formatter_class=_DefaultsHelpFormatter,
+        description=run.__doc__,
         epilog="example: safe-mapf train --env SafeCentralObstacle-v0 --stage unconstrained --out runs/u; "
                "safe-mapf train --env SafeCentralObstacle-v0 --stage constrained --init runs/u/model.zip --out runs/c",
     )
@@ -33,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--stage", choices=["unconstrained", "constrained"], default=d.stage,
                    help="train from scratch, or fine-tune --init with the Lagrange multiplier")
     p.add_argument("--timesteps", type=int, default=d.timesteps, help="environment steps of this stage")
-    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--seed", type=int, default=d.seed, help="seed of the run")
     p.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S",
                    help="one run per seed instead of --seed, each in <out>/s<seed>, and a combined summary in "
                         "<out>/summary.json (default out: runs/<env>-<stage>)")
@@ -106,7 +94,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue the run in --out from its last resume point, up to --timesteps steps in all")
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
-    g.add_argument("--no-progress", dest="progress_bar", action="store_false", help="hide the progress bar")
+    g.add_argument("--no-progress", dest="progress_bar", action="store_false",
+                   help="hide the progress bar (it is drawn only when stderr is a terminal)")
     g.add_argument("--tensorboard", dest="tensorboard_log", default=None,
                    help="write TensorBoard event files to this folder")
     g.add_argument("--verbose", type=int, default=d.verbose)
@@ -130,12 +119,14 @@ def config_from_args(args: argparse.Namespace):
     import dataclasses
 
     from agents.training import TrainConfig
+    from baselines.cli import show_progress
 
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     kwargs = {k: v for k, v in vars(args).items() if k in names}
     for k in ("target_distance", "target_cost", "oracle_band"):
         if kwargs.get(k) is not None:
             kwargs[k] = tuple(kwargs[k])
+    kwargs["progress_bar"] = show_progress(not kwargs.get("progress_bar", True))
     return TrainConfig(**kwargs)
 
 

@@ -99,7 +99,6 @@ def test_wrapper_applies_the_sampler_unless_options_are_given(env):
 
 def test_oracle_and_uniform_options():
     assert OracleSampler((1.0, 4.0)).reset_options(None) == {"goal_distance": (1.0, 4.0)}
-    assert UniformSampler().reset_options(None) is None
     assert isinstance(make_sampler("oracle", band=(1, 2)), OracleSampler)
 
 
@@ -129,3 +128,9 @@ def test_cost_fraction_splits_the_kept_problems(env):
     starts = np.array([sampler.reset_options(env)["start"] for _ in range(40)])
     assert np.sum(starts[:, 0] > 45.0) >= 10  # the 10 cost-targeted ones, x near 50
     assert np.sum(starts[:, 0] < 30.0) >= 15  # the distance-only ones are spread over the map
+
+
+def test_the_uniform_training_sampler_keeps_asking_for_goals_anywhere():
+    env = gym.make("SafeCentralObstacle-v0")
+    assert UniformSampler().reset_options(env) == {"goal_distance": "uniform"}
+    assert UniformSampler().reset_options(gym.make("Pendulum-v1")) is None

@@ -79,7 +79,7 @@ def test_help_states_each_default_once(capsys):
         main(["train", "--help"])
     text = " ".join(capsys.readouterr().out.split())  # undo the line wrapping
     assert "(default: True)" not in text and "(default: False)" not in text and "(default: None)" not in text
-    assert "--no-progress hide the progress bar --tensorboard" in text
+    assert "--no-progress hide the progress bar (it is drawn only when stderr is a terminal) --tensorboard" in text
     assert "evaluations.jsonl, summary.json --init" in text  # --out: its own default only
     assert "--timesteps TIMESTEPS environment steps of this stage (default: 30000)" in text
 

@@ -276,12 +276,14 @@ def test_compute_reward_and_terminated_on_images():
     obs, reward, terminated, _, info = env.step(np.array([1.0, 0.0], np.float32))
     assert terminated and info["is_success"]  # ground truth: 0.05 m away
     a, d = obs["achieved_goal"], obs["desired_goal"]
-    assert env.compute_reward(a, d, info) == reward == -1.0
+    assert reward == 0.0  # the step's reward follows its (ground-truth) termination
     # from images alone only identical panoramas count as reaching the goal
+    assert env.compute_reward(a, d, info) == (0.0 if np.array_equal(a, d) else -1.0)
+    assert env.compute_reward(a, a, info) == 0.0
     assert env.compute_terminated(a, a, info) is True
     assert env.compute_terminated(a, d, info) is (bool(np.array_equal(a, d)))
     batch_a, batch_d = np.stack([a, a, d]), np.stack([a, d, d])
-    assert env.compute_reward(batch_a, batch_d, [info] * 3).shape == (3,)
+    assert env.compute_reward(batch_a, batch_d, [info] * 3).tolist() == [0.0, -float(not np.array_equal(a, d)), 0.0]
     assert env.compute_terminated(batch_a, batch_d, [info] * 3).tolist() == [True, bool(np.array_equal(a, d)), True]
     assert env.compute_truncated(batch_a, batch_d, [info] * 3).tolist() == [False] * 3
 

@@ -262,8 +262,14 @@ def test_rgb_render_draws_agent_goal_and_waypoints():
     assert (after != before).any()
 
 
-def test_human_mode_without_display_names_the_problem(monkeypatch):
+def test_human_mode_without_display_names_the_problem_and_check_env_runs_headless(monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    with pytest.raises(RuntimeError, match="display"):
-        gym.make("SafeCentralObstacle-v0", render_mode="human")
+    with pytest.warns(UserWarning, match="needs a display"):
+        env = gym.make("SafeCentralObstacle-v0", render_mode="human")
+    env.reset(seed=0)
+    env.step(np.zeros(2, np.float32))
+    assert env.render() is None
+    env.close()
+    with pytest.warns(UserWarning, match="needs a display"):  # it makes the env in every render mode
+        gym_check_env(gym.make("SafeCentralObstacle-v0").unwrapped)

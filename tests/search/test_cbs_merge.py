@@ -109,6 +109,8 @@ def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name):
         t0 = time.perf_counter()
         res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
         assert res.status == "infeasible", (name, kw, res.status, res.message)
+        if not kw:  # merged, the group's search proves it: the message names the agents and why
+            assert "collide" in res.message and "alone" in res.message, res.message
         assert time.perf_counter() - t0 < 3.0
     # without merging the search cannot prove it and runs into its limit
     res = solve_cbs(adj, starts, goals, time_limit=10, node_limit=100, merge_threshold=None)

@@ -56,6 +56,23 @@ def test_a_scenario_that_cannot_be_read_names_its_file_and_line(tmp_path):
         load_scen(scen)
 
 
+def test_a_scenario_of_another_map_is_refused(tmp_path, capsys):
+    from agents.search.mapf import load_instance
+
+    rows = ["....", "....", "...."]
+    m, s = write_instance(tmp_path, rows, [((0, 0), (2, 3))])
+    assert load_instance(m, s).starts == [0]
+    s.write_text("version 1\n0\tmaps/other.map\t4\t3\t0\t0\t3\t2\t3.8\n")
+    with pytest.raises(ValueError, match="agent 0 belongs to map 'maps/other.map', not 'tiny.map'"):
+        load_instance(m, s)
+    s.write_text("version 1\n0\tmaps/tiny.map\t8\t8\t0\t0\t3\t2\t3.8\n")  # folders aside, the size differs
+    with pytest.raises(ValueError, match="for a 8x8 map .* tiny.map is 4x3"):
+        load_instance(m, s)
+    assert main(["mapf", str(m), str(s), "--agents", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "tiny.map is 4x3" in err and "Traceback" not in err
+
+
 def test_a_closed_pipe_ends_the_command_quietly():
     import subprocess
     import sys

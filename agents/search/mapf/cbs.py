@@ -720,7 +720,9 @@ class CBSSearch(ConflictGraphHeuristics):
                 # the whole instance infeasible
                 if self._plan_group(members, [EMPTY] * len(node.cons), node.paths) is None:
                     ids = ", ".join(str(self.agents[i]) for i in members)
-                    ctx.infeasible_reason = f"agents {ids} cannot all reach their goals, even ignoring the others"
+                    ctx.infeasible_reason = (
+                        f"agents {ids} cannot all reach their goals: every joint plan of these agents makes two of "
+                        "them collide (each may reach its goal alone; the other agents aside)")
                     self.proven_infeasible = True
                     return "dead"
             planned = self._plan_group(members, node.cons, node.paths)

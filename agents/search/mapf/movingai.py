@@ -46,6 +46,9 @@ class ScenAgent:
     goal: Cell
     octile_length: float
     bucket: int = 0
+    #: the map the line names (file name as written) and its ``(width, height)``
+    map_name: str = ""
+    map_size: Tuple[int, int] = (0, 0)
 
 
 def load_map(path: PathLike) -> GridMap:
@@ -84,7 +87,8 @@ def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
             raise ValueError(f"{path}:{ln + 1}: expected 9 columns, got {len(parts)}")
         try:
             sx, sy, gx, gy = (int(p) for p in parts[4:8])
-            out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0])))
+            out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0]), parts[1].strip(),
+                                 (int(parts[2]), int(parts[3]))))
         except ValueError as exc:
             raise ValueError(f"{path}:{ln + 1}: cannot read the agent's bucket, cells or length ({exc})") from None
         if k is not None and len(out) >= k:
@@ -157,10 +161,29 @@ class GridInstance:
         return out
 
 
+def check_scen_matches_map(agents: Sequence[ScenAgent], grid: GridMap, map_path: PathLike,
+                           scen_path: PathLike) -> None:
+    """``ValueError`` where a scenario line names another map (file name or size) than ``map_path``.
+
+    MovingAI scenario lines carry the map's file name, width and height; a scenario of another
+    map would otherwise run on cells that mean something else. The name is compared without
+    folders (``maps/x.map`` names ``x.map``).
+    """
+    want = Path(map_path).name
+    for i, a in enumerate(agents):
+        named = Path(a.map_name.replace("\\", "/")).name
+        if named and named != want:
+            raise ValueError(f"{scen_path}: agent {i} belongs to map {a.map_name!r}, not {want!r}")
+        if a.map_size != (0, 0) and a.map_size != (grid.width, grid.height):
+            raise ValueError(f"{scen_path}: agent {i} is for a {a.map_size[0]}x{a.map_size[1]} map (width x height); "
+                             f"{want} is {grid.width}x{grid.height}")
+
+
 def load_instance(map_path: PathLike, scen_path: PathLike, k: Optional[int] = None) -> GridInstance:
     """Load a map and the first ``k`` agents of a scenario as a :class:`GridInstance`."""
     grid = load_map(map_path)
     agents = load_scen(scen_path, k)
+    check_scen_matches_map(agents, grid, map_path, scen_path)
     graph, cells, index = grid_graph(grid)
     inst = GridInstance(grid, agents, graph, cells, index)
     for i, a in enumerate(agents):

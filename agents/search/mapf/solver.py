@@ -291,7 +291,8 @@ class CBSSolver:
                 if ok is None:  # out of time: undecided
                     return None
                 if not ok:
-                    return f"agents {a} and {b} cannot both reach their goals, even ignoring the others"
+                    return (f"agents {a} and {b} cannot both reach their goals: every plan of the two makes them "
+                            "collide with each other (each may reach its goal alone; the other agents aside)")
         return None
 
     # -------------------------------------------------------------- solve

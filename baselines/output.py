@@ -1,0 +1,105 @@
+"""Output folders and row files of the commands: checked before any work, written as rows come.
+
+:func:`check_output_dir` makes sure a command can write its results before it spends minutes
+computing them (and removes what the check created if it cannot); :class:`RowWriter` appends
+each row to a CSV file as soon as it exists, so an interrupted or failing run keeps every row
+computed so far.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+
+def check_output_dir(path: Union[str, os.PathLike], flag: str = "--out") -> Path:
+    """Create ``path`` if needed and check that files can be written in it.
+
+    Raises ``ValueError`` naming ``flag``, the folder and the reason when it cannot be created
+    or written; folders the check created are removed again in that case.
+    """
+    out = Path(path)
+    created: List[Path] = []
+    try:
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"{flag} {str(out)!r} is a file, not a folder")
+        missing = [p for p in (out, *out.parents) if not p.exists()]
+        for p in reversed(missing):
+            p.mkdir()
+            created.append(p)
+        fd, probe = tempfile.mkstemp(dir=out, prefix=".write-check-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        for p in reversed(created):
+            try:
+                p.rmdir()
+            except OSError:
+                pass
+        raise ValueError(f"{flag} {str(out)!r} is not a writable folder: {exc.strerror or exc}") from None
+    return out
+
+
+#: Where the figure scripts write unless asked to refresh the README's pictures.
+FIGURES_OUT = Path("figures_out")
+
+
+def add_figure_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--out`` (default ``figures_out/``) and ``--refresh-readme`` for a script that draws figures.
+
+    Figures go to ``--out`` so that a run never changes tracked files by accident;
+    ``--refresh-readme`` writes them where the README shows them instead.
+    """
+    parser.add_argument("--out", type=Path, default=FIGURES_OUT, help="folder to write the figures in "
+                        f"(default: {FIGURES_OUT}/)")
+    parser.add_argument("--refresh-readme", action="store_true",
+                        help="write into examples/figures/, the README's pictures (tracked files), instead of --out")
+
+
+def figure_output_dir(args: argparse.Namespace, readme_dir: Path) -> Path:
+    """The folder of :func:`add_figure_output_arguments`' choice, created and checked writable."""
+    return check_output_dir(readme_dir if args.refresh_readme else args.out,
+                            flag="--refresh-readme" if args.refresh_readme else "--out")
+
+
+class RowWriter:
+    """Append rows (dicts) to a CSV file as they come; the header is the first row's keys.
+
+    The file is started anew on the first row and flushed after every row.
+    """
+
+    def __init__(self, path: Union[str, os.PathLike], fields: Optional[Sequence[str]] = None) -> None:
+        self.path = Path(path)
+        self.fields = list(fields) if fields is not None else None
+        self._file: Any = None
+        self._writer: Optional[csv.DictWriter] = None
+        self.count = 0
+
+    def write(self, row: Dict[str, Any]) -> None:
+        """Write one row (the file is created with the header on the first)."""
+        if self._writer is None:
+            self.fields = self.fields or list(row)
+            self._file = open(self.path, "w", newline="")
+            self._writer = csv.DictWriter(self._file, fieldnames=self.fields, extrasaction="ignore")
+            self._writer.writeheader()
+        self._writer.writerow(row)
+        self._file.flush()
+        self.count += 1
+
+    def close(self) -> None:
+        """Close the file (nothing is written if no row came)."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def __enter__(self) -> "RowWriter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+__all__ = ["FIGURES_OUT", "RowWriter", "add_figure_output_arguments", "check_output_dir", "figure_output_dir"]
