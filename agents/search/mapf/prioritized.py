@@ -1,0 +1,138 @@
+"""Prioritised planning (PP) with safe-interval path planning: many agents, fast, not optimal.
+
+Agents are planned one at a time in a priority order; each gets its earliest path that avoids
+every path planned before it (:func:`~agents.search.mapf.sipp.sipp`), then its path is
+reserved (:class:`~agents.search.mapf.sipp.IntervalTable`). Prioritised planning is
+incomplete: an agent may find no path because earlier agents block it (typically one that
+passes through its start before it can leave, or parks across its way). When that happens the
+order is changed (the failed agent moves to the front) and planning starts again, up to
+``restarts`` times. The order is a function of the instance alone, so the same instance gives
+the same plan on any machine.
+
+The budget is counted in work: SIPP expansions over all agents and restarts
+(``expansion_limit``); the wall-clock ``time_limit`` is only a safety net. Reaching either
+returns status ``"timeout"`` (the message says which).
+"""
+from __future__ import annotations
+
+import time as _time
+from typing import List, Optional, Sequence
+
+from .instance import UNREACHABLE, MapfInstance
+from .result import CBSResult, CBSStats
+from .sipp import BudgetExceeded, Events, IntervalTable, sipp
+
+#: default SIPP expansions of one solve, over all agents and restarts
+DEFAULT_EXPANSION_LIMIT = 2_000_000
+#: default steps for which a start is kept free for its agent until it is planned
+DEFAULT_START_HOLD = 30
+
+
+def initial_order(inst: MapfInstance) -> List[int]:
+    """Agents by decreasing distance to their goal (ties by index): far agents go first, the
+    usual choice, since a long path is the hardest to fit among others."""
+    h = inst.h
+    return sorted(range(inst.n_agents), key=lambda i: (-h[i][inst.starts[i]], i))
+
+
+def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
+                  budget: Optional[int] = None, deadline: Optional[float] = None, start_hold: int = 0):
+    """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
+
+    ``paths[i]`` is agent ``i``'s events. While not planned, an agent's start is held for it
+    during ``0 .. start_hold``, so that earlier agents keep away from where later ones wait to
+    leave (without it, on a dense buffer graph most later agents find their start passed by in
+    the first steps, before they can get away). Raises
+    :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
+    ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
+    """
+    table = IntervalTable(inst)
+    paths: List[Optional[Events]] = [None] * inst.n_agents
+    if start_hold > 0:
+        for i in order:
+            table.hold(i, inst.starts[i], start_hold)
+    for i in order:
+        if deadline is not None and _time.perf_counter() > deadline:
+            raise TimeoutError
+        table.release(i)
+        p = sipp(inst, i, table, budget, counter)
+        if p is None:
+            return None, i
+        paths[i] = p
+        table.reserve(i, p)
+    return paths, None
+
+
+def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
+                      expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
+                      time_limit: Optional[float] = None,
+                      order: Optional[Sequence[int]] = None,
+                      start_hold: int = DEFAULT_START_HOLD) -> CBSResult:
+    """Prioritised planning with SIPP and priority restarts; a :class:`CBSResult`.
+
+    Args:
+        inst: the instance (either time model, with or without proximity).
+        restarts: how many times a failed agent may be moved to the front and planning redone.
+        expansion_limit: SIPP expansions over the whole solve (``None``: no limit).
+        time_limit: wall-clock seconds, a safety net (``None``: none).
+        order: the first priority order (default :func:`initial_order`).
+        start_hold: steps ``0 .. start_hold`` for which every agent's start (and the nodes near
+            it) is kept free for it until it is planned (see :func:`plan_in_order`).
+
+    Returns:
+        status ``"suboptimal"`` with paths (their sum of costs is not bounded), ``"timeout"``
+        (budget, time or restarts used up; the message says which), or ``"infeasible"`` when
+        some agent's goal cannot be reached from its start even alone.
+    """
+    if start_hold < 0:
+        raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
+    if restarts < 0:
+        raise ValueError(f"restarts must be >= 0, got {restarts!r}")
+    if expansion_limit is not None and expansion_limit < 1:
+        raise ValueError(f"expansion_limit must be >= 1 or None, got {expansion_limit!r}")
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
+    t0 = _time.perf_counter()
+    stats = CBSStats()
+    counter = [0]
+
+    def finish(res: CBSResult) -> CBSResult:
+        stats.ll_expanded = counter[0]
+        stats.runtime_s = _time.perf_counter() - t0
+        res.stats = stats
+        res.time_model = inst.time_model
+        return res
+
+    k = inst.n_agents
+    for i in range(k):
+        if inst.h[i][inst.starts[i]] >= UNREACHABLE:
+            return finish(CBSResult("infeasible", message=f"agent {i} cannot reach its goal from its start"))
+    cur = list(order) if order is not None else initial_order(inst)
+    if sorted(cur) != list(range(k)):
+        raise ValueError(f"order must be a permutation of the {k} agents")
+    deadline = None if time_limit is None else t0 + time_limit
+    lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
+    failed: Optional[int] = None
+    for attempt in range(restarts + 1):
+        stats.hl_expanded = attempt + 1
+        try:
+            paths, failed = plan_in_order(inst, cur, counter, expansion_limit, deadline, start_hold)
+        except BudgetExceeded:
+            return finish(CBSResult("timeout", lower_bound=lb,
+                                    message=f"expansion limit of {expansion_limit} reached (prioritised planning)"))
+        except TimeoutError:
+            return finish(CBSResult("timeout", lower_bound=lb,
+                                    message=f"time limit of {time_limit:g} s reached (prioritised planning)"))
+        if paths is not None:
+            full = [p for p in paths if p is not None]
+            costs = [p[-1][1] for p in full]
+            soc = sum(costs)
+            status = "optimal" if soc == lb else "suboptimal"
+            msg = ("cost equals the lower bound" if status == "optimal"
+                   else f"prioritised planning ({attempt} restarts); cost not bounded")
+            return finish(CBSResult(status, full, soc, max(costs, default=0), lb, message=msg))
+        assert failed is not None
+        cur.remove(failed)
+        cur.insert(0, failed)
+    return finish(CBSResult("timeout", lower_bound=lb,
+                            message=f"prioritised planning failed {restarts + 1} times (last: agent {failed})"))
