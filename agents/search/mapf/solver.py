@@ -90,6 +90,9 @@ class CBSSolver:
             constraint-tree node). ``None`` turns the guard off; where the resident size cannot
             be read (no ``/proc`` and no :mod:`resource`) there is no guard.
         node_limit: high-level expansions; the search ends with status ``"timeout"``.
+        expansion_limit: low-level expansions over the whole solve (a work budget, checked
+            between high-level steps, so the same input stops at the same point on an idle and
+            a loaded machine); the search ends with status ``"timeout"``. ``None``: no limit.
         pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
             (past it the pair's lower bound is used, which keeps the heuristic admissible); an
             agent pair whose searches keep reaching it gets half of it each time, down to 8.
@@ -179,6 +182,7 @@ class CBSSolver:
         time_limit: float = 60.0,
         memory_limit_mb: Optional[float] = DEFAULT_MEMORY_LIMIT_MB,
         node_limit: Optional[int] = None,
+        expansion_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,
         merge_threshold: Optional[int] = DEFAULT_MERGE_THRESHOLD,
@@ -212,6 +216,8 @@ class CBSSolver:
             raise ValueError(f"memory_limit_mb must be > 0 (or None for no limit), got {memory_limit_mb!r}")
         if node_limit is not None and node_limit < 0:
             raise ValueError(f"node_limit must be >= 0, got {node_limit!r}")
+        if expansion_limit is not None and expansion_limit < 0:
+            raise ValueError(f"expansion_limit must be >= 0, got {expansion_limit!r}")
         self.suboptimality = float(suboptimality)
         if merge_threshold is not None and merge_threshold < 0:
             raise ValueError(f"merge_threshold must be >= 0 (or None for no merging), got {merge_threshold!r}")
@@ -241,6 +247,7 @@ class CBSSolver:
         self.time_limit = float(time_limit)
         self.memory_limit_mb = None if memory_limit_mb is None else float(memory_limit_mb)
         self.node_limit = node_limit
+        self.expansion_limit = expansion_limit
         self.pair_node_limit = int(pair_node_limit)
         self.pair_check_states = int(pair_check_states)
         self.merge_threshold = None if merge_threshold is None else int(merge_threshold)
@@ -347,7 +354,9 @@ class CBSSolver:
             status, node = run()
         except SearchTimeout:
             lb = search.lower_bound or None
-            if ctx.stop_reason == "memory":
+            if ctx.stop_reason == "work":
+                msg = f"expansion limit of {self.expansion_limit} low-level expansions reached"
+            elif ctx.stop_reason == "memory":
                 msg = (f"memory limit reached: the search grew the process by more than "
                        f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
             else:
