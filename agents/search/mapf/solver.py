@@ -19,6 +19,7 @@ from .cbs import CBSSearch
 from .constraints import EMPTY
 from .context import SearchContext
 from .ecbs import ECBSSearch
+from .feasibility import configuration_count, joint_feasible
 from .instance import GraphLike, MapfInstance, ProximityLike
 from .lowlevel import SearchTimeout
 from .result import CBSResult
@@ -30,6 +31,8 @@ HEURISTICS = ("none", "cg", "dg", "wdg")
 DEFAULT_MERGE_THRESHOLD = 10
 #: default ``merge_space_limit`` of meta-agent CBS (joint configurations of a meta-agent)
 DEFAULT_MERGE_SPACE_LIMIT = 2_000
+#: default ``joint_check_states``: joint configurations the exhaustive feasibility check may enumerate
+DEFAULT_JOINT_CHECK_STATES = 20_000
 #: default ``memory_limit_mb``: how much a search may grow the process (MiB)
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
@@ -99,6 +102,11 @@ class CBSSolver:
         pair_check_states: an exact two-agent feasibility check of every pair (which can prove
             infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
             once the search has run for a second when it is at most 100 times this.
+        joint_check_states: where the agents' joint configurations (placements on distinct
+            nodes) number at most this, an exhaustive search over them decides before the
+            search whether any plan exists (:func:`~agents.search.mapf.feasibility.joint_feasible`),
+            so a small impossible instance is reported ``"infeasible"`` at once instead of after
+            the time limit (0: never).
         merge_threshold: meta-agent CBS (MA-CBS), unit time only: once the splits on conflicts
             between two agents (or meta-agents: summed over their members) number more than
             this in the search, the node being split merges them into one meta-agent instead,
@@ -185,6 +193,7 @@ class CBSSolver:
         expansion_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,
+        joint_check_states: int = DEFAULT_JOINT_CHECK_STATES,
         merge_threshold: Optional[int] = DEFAULT_MERGE_THRESHOLD,
         merge_node_limit: int = 100_000,
         merge_max_agents: int = 4,
@@ -250,6 +259,9 @@ class CBSSolver:
         self.expansion_limit = expansion_limit
         self.pair_node_limit = int(pair_node_limit)
         self.pair_check_states = int(pair_check_states)
+        if joint_check_states < 0:
+            raise ValueError(f"joint_check_states must be >= 0, got {joint_check_states!r}")
+        self.joint_check_states = int(joint_check_states)
         self.merge_threshold = None if merge_threshold is None else int(merge_threshold)
         self.merge_node_limit = int(merge_node_limit)
         self.merge_max_agents = int(merge_max_agents)
@@ -280,7 +292,13 @@ class CBSSolver:
                             return (f"the {what}s of agents {a} and {b} ({nodes[a]}, {nodes[b]}) are closer "
                                     "than the proximity radius")
         if self._pair_check_size() <= self.pair_check_states:
-            return self._pair_check()
+            reason = self._pair_check()
+            if reason is not None:
+                return reason
+        n_conf = configuration_count(inst.n_nodes, inst.n_agents)
+        if inst.n_agents > 2 and n_conf <= self.joint_check_states and joint_feasible(inst, n_conf) is False:
+            return (f"no joint plan exists: an exhaustive search over the agents' {n_conf} joint configurations "
+                    "never reaches the goals")
         return None
 
     def _pair_check_size(self) -> int:
