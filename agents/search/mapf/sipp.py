@@ -64,6 +64,8 @@ class IntervalTable:
         near = inst.near
         self._reach: List[Tuple[int, ...]] = [
             tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
+        #: per node, its moves ``(v, duration)`` (waiting left out)
+        self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
 
     def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
         self._touched.setdefault((agent, hold), set()).add(node)
@@ -152,27 +154,30 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     starts_of = table.interval_starts
     unit = table.unit
     moves = table.moves
-    succ_d = inst.succ_d
+    out = table.out
+    N = inst.n_nodes
     s_int = safe(s)
     if not s_int or s_int[0][0] != 0:
         return None  # the start is blocked at time 0
     count = counter if counter is not None else [0]
-    # heap entries: (f, -g, node, interval index); best arrival per (node, interval)
-    best: Dict[Tuple[int, int], int] = {(s, 0): 0}
-    parent: Dict[Tuple[int, int], Optional[Tuple[Tuple[int, int], int]]] = {(s, 0): None}
-    heap = [(h[s], 0, s, 0)]
+    push, pop = heapq.heappush, heapq.heappop
+    # a state (node v, its j-th safe interval) is coded j * N + v; best arrival and parent per code
+    best: Dict[int, int] = {s: 0}
+    parent: Dict[int, Tuple[int, int]] = {}
+    heap = [(h[s], 0, s)]
     while heap:
-        f, neg_t, u, iu = heapq.heappop(heap)
+        f, neg_t, code = pop(heap)
         t_u = -neg_t
-        if best.get((u, iu), FOREVER) < t_u:
+        if best[code] < t_u:
             continue
-        b_u = safe(u)[iu][1]
+        u = code % N
+        b_u = cache[u][code // N][1]  # type: ignore[index]
         if u == g and b_u == FOREVER:
-            return _events((u, iu), best, parent)
+            return _events(code, N, best, parent)
         count[0] += 1
         if budget is not None and count[0] > budget:
             raise BudgetExceeded
-        for v, d in succ_d[u][1:]:
+        for v, d in out[u]:
             hv = h[v]
             if hv >= UNREACHABLE:
                 continue
@@ -184,11 +189,10 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
                 v_int = safe(v)
             if v_int is ALWAYS and not unit:  # the common case: nothing ever blocks v
                 arr = t_u + d
-                key = (v, 0)
-                if arr < best.get(key, FOREVER):
-                    best[key] = arr
-                    parent[key] = ((u, iu), t_u)
-                    heapq.heappush(heap, (arr + hv, -arr, v, 0))
+                if arr < best.get(v, FOREVER):
+                    best[v] = arr
+                    parent[v] = (code, t_u)
+                    push(heap, (arr + hv, -arr, v))
                 continue
             lead = d if unit else 0  # v must be free from t + lead to t + d
             # first interval of v that could contain t + lead for some t >= t_u
@@ -207,24 +211,22 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
                 if t > last:
                     continue
                 arr = t + d
-                key = (v, jv)
+                key = jv * N + v
                 if arr < best.get(key, FOREVER):
                     best[key] = arr
-                    parent[key] = ((u, iu), t)
-                    heapq.heappush(heap, (arr + hv, -arr, v, jv))
+                    parent[key] = (code, t)
+                    push(heap, (arr + hv, -arr, key))
     return None
 
 
-def _events(key: Tuple[int, int], best: Dict[Tuple[int, int], int],
-            parent: Dict[Tuple[int, int], Optional[Tuple[Tuple[int, int], int]]]) -> Events:
+def _events(code: int, N: int, best: Dict[int, int], parent: Dict[int, Tuple[int, int]]) -> Events:
     """Rebuild ``[(node, time), ...]``: each arrival, and the departure after a wait."""
-    out: Events = [(key[0], best[key])]
-    link = parent[key]
-    while link is not None:
-        prev, t_dep = link
+    out: Events = [(code % N, best[code])]
+    while code in parent:
+        prev, t_dep = parent[code]
         if t_dep > best[prev]:
-            out.append((prev[0], t_dep))
-        out.append((prev[0], best[prev]))
-        link = parent[prev]
+            out.append((prev % N, t_dep))
+        out.append((prev % N, best[prev]))
+        code = prev
     out.reverse()
     return out
