@@ -24,8 +24,10 @@ from .sipp import BudgetExceeded, Events, IntervalTable, sipp
 
 #: default SIPP expansions of one solve, over all agents and restarts
 DEFAULT_EXPANSION_LIMIT = 2_000_000
-#: default steps for which a start is kept free for its agent until it is planned
-DEFAULT_START_HOLD = 30
+#: default ``start_hold``, in moves of the graph's mean duration: a start is kept free for its
+#: agent for about this many moves until it is planned (30 steps on the 1000-node buffer graph,
+#: whose edges take 5 steps on average; 6 on a unit-time grid)
+DEFAULT_START_HOLD_MOVES = 6
 
 
 def initial_order(inst: MapfInstance) -> List[int]:
@@ -67,7 +69,7 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
                       expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
                       time_limit: Optional[float] = None,
                       order: Optional[Sequence[int]] = None,
-                      start_hold: int = DEFAULT_START_HOLD) -> CBSResult:
+                      start_hold: Optional[int] = None) -> CBSResult:
     """Prioritised planning with SIPP and priority restarts; a :class:`CBSResult`.
 
     Args:
@@ -77,13 +79,17 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         time_limit: wall-clock seconds, a safety net (``None``: none).
         order: the first priority order (default :func:`initial_order`).
         start_hold: steps ``0 .. start_hold`` for which every agent's start (and the nodes near
-            it) is kept free for it until it is planned (see :func:`plan_in_order`).
+            it) is kept free for it until it is planned (see :func:`plan_in_order`); default
+            ``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration.
 
     Returns:
         status ``"suboptimal"`` with paths (their sum of costs is not bounded), ``"timeout"``
         (budget, time or restarts used up; the message says which), or ``"infeasible"`` when
         some agent's goal cannot be reached from its start even alone.
     """
+    if start_hold is None:
+        data = inst.durations.data
+        start_hold = int(round(DEFAULT_START_HOLD_MOVES * (float(data.mean()) if len(data) else 1.0)))
     if start_hold < 0:
         raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
     if restarts < 0:
