@@ -132,3 +132,23 @@ def test_mapf_command_reports_infeasible_on_a_movingai_file(tmp_path, capsys):
     rc = main(["mapf", str(m), str(s), "--agents", "3", "--json"])
     report = json.loads(capsys.readouterr().out)
     assert rc == 1 and report["status"] == "infeasible" and "joint configurations" in report["message"]
+
+
+def test_an_impossible_enclosed_part_of_a_larger_graph_is_found():
+    # the impossible corridor of nine with its pocket, beside a separate 6 x 6 open grid where
+    # four more agents could move freely: the whole instance is far too large to enumerate
+    n_c, edges = corridor_with_pocket(9, 1)
+    adj = adjacency(n_c, edges)
+    g = 6
+    for r in range(g):
+        for c in range(g):
+            adj.append([n_c + (r + dr) * g + c + dc for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0))
+                        if 0 <= r + dr < g and 0 <= c + dc < g])
+    starts = [0, 1, 2] + [n_c + i for i in (0, 5, 30, 35)]
+    goals = [8, 7, 6] + [n_c + i for i in (35, 30, 5, 0)]
+    assert configuration_count(len(adj), len(starts)) > 10**9
+    res = solve_cbs(adj, starts, goals, time_limit=30)
+    assert res.status == "infeasible" and "agents [0, 1, 2]" in res.message
+    # the same with the corridor's order kept is solved as usual
+    ok = solve_cbs(adj, starts, [6, 7, 8] + goals[3:], time_limit=30)
+    assert ok.status == "optimal"

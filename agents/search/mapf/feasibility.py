@@ -22,7 +22,11 @@ import heapq
 import math
 from typing import Dict, List, Optional, Tuple
 
-from .instance import MapfInstance
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+
+from .instance import MapfInstance, Proximity
 
 #: default ``max_states``: joint configurations a check may enumerate
 DEFAULT_MAX_STATES = 100_000
@@ -103,3 +107,47 @@ def _joint_moves(conf: Tuple[int, ...], succ: List[List[int]], near) -> List[Tup
 
     place(0)
     return out
+
+
+def infeasible_component(inst: MapfInstance, max_states: int = DEFAULT_MAX_STATES) -> Optional[str]:
+    """Why the instance has no plan, found by :func:`joint_feasible` on each small part, or ``None``.
+
+    The agents are grouped by the weakly connected component of the graph their start lies in
+    (components joined where a node of one is near a node of the other, under proximity). An
+    agent never leaves its component, so a plan of the whole instance restricted to one group
+    is a plan of that group alone on its component: if a group with at most ``max_states``
+    joint configurations has none, the instance has none. ``None`` says nothing was proved.
+    """
+    if inst.n_agents < 2:
+        return None
+    n_parts, label = connected_components(inst.durations, directed=True, connection="weak")
+    if n_parts > 1 and inst.near_mat is not None:
+        links = inst.durations + sparse.csr_matrix(inst.near_mat.astype(np.float64))
+        _, label = connected_components(links, directed=True, connection="weak")
+    groups: Dict[int, List[int]] = {}
+    for i, s in enumerate(inst.starts):
+        groups.setdefault(int(label[s]), []).append(i)
+    for comp, agents in sorted(groups.items(), key=lambda kv: kv[1][0]):
+        if len(agents) < 2:
+            continue
+        nodes = np.flatnonzero(label == comp)
+        if configuration_count(len(nodes), len(agents)) > max_states:
+            continue
+        sub = inst if len(nodes) == inst.n_nodes and len(agents) == inst.n_agents else _restrict(inst, nodes, agents)
+        if joint_feasible(sub, max_states) is False:
+            n_conf = configuration_count(len(nodes), len(agents))
+            who = "the agents'" if sub is inst else f"agents {agents} (on a part of {len(nodes)} nodes):"
+            return f"no joint plan exists: an exhaustive search over {who} {n_conf} joint configurations never " \
+                   "reaches the goals"
+    return None
+
+
+def _restrict(inst: MapfInstance, nodes: np.ndarray, agents: List[int]) -> MapfInstance:
+    """The instance of ``agents`` alone on the graph induced by ``nodes`` (unit time)."""
+    index = {int(v): i for i, v in enumerate(nodes)}
+    graph = inst.durations[nodes][:, nodes]
+    prox = None
+    if inst.near_mat is not None:
+        prox = Proximity(np.where(inst.near_mat[np.ix_(nodes, nodes)], 0.0, 1.0), 0.5)
+    return MapfInstance(graph, [index[inst.starts[i]] for i in agents], [index[inst.goals[i]] for i in agents],
+                        time_model="unit", proximity=prox)

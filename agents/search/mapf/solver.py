@@ -19,7 +19,7 @@ from .cbs import CBSSearch
 from .constraints import EMPTY
 from .context import SearchContext
 from .ecbs import ECBSSearch
-from .feasibility import configuration_count, joint_feasible
+from .feasibility import infeasible_component
 from .instance import GraphLike, MapfInstance, ProximityLike
 from .lowlevel import SearchTimeout
 from .result import CBSResult
@@ -102,11 +102,12 @@ class CBSSolver:
         pair_check_states: an exact two-agent feasibility check of every pair (which can prove
             infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
             once the search has run for a second when it is at most 100 times this.
-        joint_check_states: where the agents' joint configurations (placements on distinct
-            nodes) number at most this, an exhaustive search over them decides before the
-            search whether any plan exists (:func:`~agents.search.mapf.feasibility.joint_feasible`),
-            so a small impossible instance is reported ``"infeasible"`` at once instead of after
-            the time limit (0: never).
+        joint_check_states: where the joint configurations (placements on distinct nodes) of
+            the agents of one connected part of the graph number at most this, an exhaustive
+            search over them decides before the search whether those agents can reach their
+            goals (:func:`~agents.search.mapf.feasibility.infeasible_component`), so a small
+            impossible instance, or an impossible small enclosed part of a larger one, is
+            reported ``"infeasible"`` at once instead of after the time limit (0: never).
         merge_threshold: meta-agent CBS (MA-CBS), unit time only: once the splits on conflicts
             between two agents (or meta-agents: summed over their members) number more than
             this in the search, the node being split merges them into one meta-agent instead,
@@ -295,10 +296,8 @@ class CBSSolver:
             reason = self._pair_check()
             if reason is not None:
                 return reason
-        n_conf = configuration_count(inst.n_nodes, inst.n_agents)
-        if inst.n_agents > 2 and n_conf <= self.joint_check_states and joint_feasible(inst, n_conf) is False:
-            return (f"no joint plan exists: an exhaustive search over the agents' {n_conf} joint configurations "
-                    "never reaches the goals")
+        if self.joint_check_states > 0:
+            return infeasible_component(inst, self.joint_check_states)
         return None
 
     def _pair_check_size(self) -> int:
