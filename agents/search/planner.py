@@ -25,7 +25,8 @@ that agent's start and goal only (doubling until a path exists; ``MultiAgentPlan
 reports the largest value used), so the rest of the graph stays as safe as asked; with
 ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
 call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
-Every solver call is budgeted in expansions (``expansion_limit``), with a wall-clock limit
+Every solver call is budgeted in expansions (``expansion_limit``,
+``prioritized_expansions_per_agent``), with a wall-clock limit
 (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
@@ -53,9 +54,12 @@ from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 SOLVERS = ("auto", "cbs", "prioritized")
 #: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above.
 AUTO_SEARCH_AGENTS = 20
-#: default ``expansion_limit`` of one solver call: about 5 s of either solver on an idle machine
-#: with 20 agents on a 1000-node buffer graph
+#: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
+#: buffer graph on an idle machine
 DEFAULT_EXPANSION_LIMIT = 50_000
+#: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
+#: 150,000 to 190,000 safe-interval expansions
+DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_000
 
 
 @dataclass
@@ -212,10 +216,11 @@ class BufferPlanner:
             another, each on its earliest path around the earlier ones; fast with hundreds of
             agents, cost not bounded, can fail where a plan exists) or ``"auto"`` (default):
             ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``.
-        expansion_limit: the work budget of one solver call: low-level expansions of CBS / ECBS
-            (space-time states), or safe-interval expansions of prioritised planning over all
-            agents and restarts (``None``: none). Counted in work, not seconds, so the same
+        expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
+            (space-time states; ``None``: none). Counted in work, not seconds, so the same
             problem gives the same plan (or the same timeout) on an idle and a loaded machine.
+        prioritized_expansions_per_agent: the work budget of prioritised planning, in
+            safe-interval expansions over all agents and restarts, per agent (``None``: none).
         time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
             Either ends the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
@@ -241,6 +246,7 @@ class BufferPlanner:
         suboptimality: float = 1.1,
         solver: str = "auto",
         expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
+        prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
         time_limit: float = 30.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
@@ -270,13 +276,16 @@ class BufferPlanner:
         self.suboptimality = float(suboptimality)
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-        if expansion_limit is not None and not (isinstance(expansion_limit, (int, np.integer))
-                                                and expansion_limit >= 1):
-            raise ValueError(f"expansion_limit must be an integer >= 1 or None, got {expansion_limit!r}")
+        for name, lim in (("expansion_limit", expansion_limit),
+                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent)):
+            if lim is not None and not (isinstance(lim, (int, np.integer)) and lim >= 1):
+                raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
         if not time_limit > 0:
             raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
         self.solver = solver
         self.expansion_limit = None if expansion_limit is None else int(expansion_limit)
+        self.prioritized_expansions_per_agent = (None if prioritized_expansions_per_agent is None
+                                                 else int(prioritized_expansions_per_agent))
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
@@ -308,6 +317,7 @@ class BufferPlanner:
             d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
             solver=self.solver, expansion_limit=self.expansion_limit,
+            prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels)
         opts.update(kwargs)
@@ -387,7 +397,9 @@ class BufferPlanner:
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
-            return solve_prioritized(inst, expansion_limit=self.expansion_limit, time_limit=self.time_limit), solver
+            per_agent = self.prioritized_expansions_per_agent
+            budget = None if per_agent is None else per_agent * k
+            return solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit), solver
         res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
                         expansion_limit=self.expansion_limit).solve()
         fb = self.fallback_suboptimality

@@ -15,53 +15,115 @@ returns status ``"timeout"`` (the message says which).
 """
 from __future__ import annotations
 
+import collections
+import heapq
 import time as _time
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Set
 
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
-from .sipp import BudgetExceeded, Events, IntervalTable, sipp
+from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
 
 #: default SIPP expansions of one solve, over all agents and restarts
 DEFAULT_EXPANSION_LIMIT = 2_000_000
-#: default ``start_hold``, in moves of the graph's mean duration: a start is kept free for its
-#: agent for about this many moves until it is planned (30 steps on the 1000-node buffer graph,
-#: whose edges take 5 steps on average; 6 on a unit-time grid)
+#: default ``start_hold``, in moves of the graph's mean duration (30 steps on the 1000-node
+#: buffer graph, whose edges take 5 steps on average; 6 on a unit-time grid)
 DEFAULT_START_HOLD_MOVES = 6
 
 
+def _blocks_start(inst: MapfInstance, goal: int, start: int) -> bool:
+    """Whether an agent parked at ``goal`` would block an agent waiting at ``start``."""
+    near = inst.near_mat
+    return goal == start or (near is not None and bool(near[goal, start]))
+
+
 def initial_order(inst: MapfInstance) -> List[int]:
-    """Agents by decreasing distance to their goal (ties by index): far agents go first, the
-    usual choice, since a long path is the hardest to fit among others."""
+    """Far agents first (decreasing distance to the goal, ties by index: a long path is the
+    hardest to fit among others), except that an agent whose goal is at or near another
+    agent's start comes after that agent (it could not park before the other has left).
+    Agents on a cycle of such precedences keep the far-first order among themselves, last."""
+    k = inst.n_agents
     h = inst.h
-    return sorted(range(inst.n_agents), key=lambda i: (-h[i][inst.starts[i]], i))
+    rank = sorted(range(k), key=lambda i: (-h[i][inst.starts[i]], i))
+    pos = {a: r for r, a in enumerate(rank)}
+    after: List[List[int]] = [[] for _ in range(k)]
+    waiting = [0] * k
+    for i in range(k):
+        for j in range(k):
+            if i != j and _blocks_start(inst, inst.goals[i], inst.starts[j]):
+                after[j].append(i)  # i parks where j waits: j goes first
+                waiting[i] += 1
+    ready = [(pos[i], i) for i in range(k) if not waiting[i]]
+    heapq.heapify(ready)
+    order: List[int] = []
+    while ready:
+        _, j = heapq.heappop(ready)
+        order.append(j)
+        for i in after[j]:
+            waiting[i] -= 1
+            if not waiting[i]:
+                heapq.heappush(ready, (pos[i], i))
+    placed = set(order)
+    return order + [i for i in rank if i not in placed]
 
 
 def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
                   budget: Optional[int] = None, deadline: Optional[float] = None, start_hold: int = 0):
     """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
 
-    ``paths[i]`` is agent ``i``'s events. While not planned, an agent's start is held for it
-    during ``0 .. start_hold``, so that earlier agents keep away from where later ones wait to
-    leave (without it, on a dense buffer graph most later agents find their start passed by in
-    the first steps, before they can get away). Raises
-    :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
-    ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
+    ``paths[i]`` is agent ``i``'s events. An agent not planned yet waits at its start, so its
+    start (and the nodes near it) is held for it: earlier agents keep away from it until it is
+    planned (without this, on a dense buffer graph most later agents find their start passed by
+    in the first steps, before they can get away). Only an agent that must park at or near a
+    held start sees that hold end after ``start_hold`` steps (the waiting agent then has to be
+    gone by the time it arrives). An agent that finds no path while shut in by agents still
+    waiting at their starts is put back behind them, once. Raises :class:`~agents.search.mapf.sipp.BudgetExceeded`
+    past ``budget`` expansions and ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
     """
     table = IntervalTable(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
-    if start_hold > 0:
-        for i in order:
-            table.hold(i, inst.starts[i], start_hold)
     for i in order:
+        table.hold(i, inst.starts[i], FOREVER)
+    unplanned = set(order)
+    queue = collections.deque(order)
+    deferred: Set[int] = set()
+    while queue:
         if deadline is not None and _time.perf_counter() > deadline:
             raise TimeoutError
+        i = queue.popleft()
         table.release(i)
-        p = sipp(inst, i, table, budget, counter)
-        if p is None:
+        unplanned.discard(i)
+        shortened = [j for j in unplanned if _blocks_start(inst, inst.goals[i], inst.starts[j])]
+        for j in shortened:
+            table.release(j)
+            table.hold(j, inst.starts[j], start_hold)
+        explored: Set[int] = set()
+        p = sipp(inst, i, table, budget, counter, explored)
+        for j in shortened:  # for everybody else, the hold lasts until j is planned
+            table.release(j)
+            table.hold(j, inst.starts[j], FOREVER)
+        if p is not None:
+            paths[i] = p
+            table.reserve(i, p)
+            continue
+        # shut in by agents still waiting at their starts? plan them first, then try again
+        region = set(explored)
+        region.add(inst.starts[i])
+        for u in explored:
+            region.update(inst.succ[u])
+        waiting: Set[int] = set()
+        for x in region:
+            waiting |= table.holders(x)
+        if i in deferred or not waiting:
             return None, i
-        paths[i] = p
-        table.reserve(i, p)
+        deferred.add(i)
+        table.hold(i, inst.starts[i], FOREVER)
+        unplanned.add(i)
+        ahead = [a for a in queue if a in waiting]
+        for a in ahead:
+            queue.remove(a)
+        queue.appendleft(i)
+        queue.extendleft(reversed(ahead))
     return paths, None
 
 
@@ -78,8 +140,8 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         expansion_limit: SIPP expansions over the whole solve (``None``: no limit).
         time_limit: wall-clock seconds, a safety net (``None``: none).
         order: the first priority order (default :func:`initial_order`).
-        start_hold: steps ``0 .. start_hold`` for which every agent's start (and the nodes near
-            it) is kept free for it until it is planned (see :func:`plan_in_order`); default
+        start_hold: steps ``0 .. start_hold`` for which an agent not planned yet keeps its start
+            against an agent that must park at or near it (see :func:`plan_in_order`); default
             ``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration.
 
     Returns:

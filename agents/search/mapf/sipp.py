@@ -89,6 +89,10 @@ class IntervalTable:
         """Drop what :meth:`hold` kept for ``agent``."""
         self._drop(agent, True)
 
+    def holders(self, node: int) -> Set[int]:
+        """The agents not planned yet whose held start blocks ``node``."""
+        return {e[2] for e in self._blocked[node] if e[3]}
+
     def reserve(self, agent: int, events: Sequence[Tuple[int, int]]) -> None:
         """Block what ``agent`` following ``events`` (then parked at its last node) occupies."""
         unit = self.unit
@@ -137,12 +141,13 @@ class BudgetExceeded(Exception):
 
 
 def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int] = None,
-         counter: Optional[List[int]] = None) -> Optional[Events]:
+         counter: Optional[List[int]] = None, explored: Optional[Set[int]] = None) -> Optional[Events]:
     """The earliest timed path of ``agent`` to its goal that avoids ``table`` (``None``: none).
 
     A* over ``(node, safe interval)`` states with the instance's true-distance heuristic; ties
     go to the deeper state. ``counter`` (a one-element list) accumulates expansions; once it
-    exceeds ``budget`` the search raises :class:`BudgetExceeded`. The path is optimal: it
+    exceeds ``budget`` the search raises :class:`BudgetExceeded`. ``explored`` (optional)
+    collects the nodes the search expanded (where a search that fails was confined). The path is optimal: it
     arrives at the goal no later than any other path that avoids the table and parks there.
     """
     s, g = inst.starts[agent], inst.goals[agent]
@@ -175,6 +180,8 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
         if u == g and b_u == FOREVER:
             return _events(code, N, best, parent)
         count[0] += 1
+        if explored is not None:
+            explored.add(u)
         if budget is not None and count[0] > budget:
             raise BudgetExceeded
         for v, d in out[u]:
