@@ -128,7 +128,7 @@ def test_interval_table_holds_and_releases():
     inst = MapfInstance([[1], [0, 2], [1]], [0, 2], [2, 0], time_model="unit")
     table = IntervalTable(inst)
     table.hold(1, 2, 5)
-    assert table.safe(2) == [(6, FOREVER)]
+    assert table.safe(2) == [(6, FOREVER)] and table.holders(2) == {1} and table.holders(0) == set()
     table.reserve(0, [(0, 0), (1, 1), (1, 8), (2, 9)])
     assert table.safe(1) == [(0, 0), (9, FOREVER)]
     assert table.safe(2) == [(6, 8)]  # held to 5, then agent 0 parks there from 9
@@ -166,6 +166,25 @@ def test_prioritized_expansion_budget_is_reported_as_timeout():
     res = solve_prioritized(inst, expansion_limit=20)
     assert res.status == "timeout" and "expansion limit of 20" in res.message
     assert res.stats.ll_expanded == 21
+
+
+def test_initial_order_puts_an_agent_after_the_one_waiting_at_its_goal():
+    # a path 0-1-2-3: agent 0 (farther) ends at 2, where agent 1 starts: agent 1 goes first
+    inst = MapfInstance([[1], [0, 2], [1, 3], [2]], [0, 2], [2, 3], time_model="unit")
+    assert initial_order(inst) == [1, 0]
+    # on a cycle of such precedences the far-first order stays
+    cyc = MapfInstance([[1], [0, 2], [1, 3], [2]], [0, 3], [3, 0], time_model="unit")
+    assert initial_order(cyc) == [0, 1]
+
+
+def test_an_agent_shut_in_by_a_waiting_agent_goes_after_it():
+    # path 0-1-2-3 with a pocket 4 off node 2; agent 0 (0 -> 3) is planned first but agent 1
+    # waits at 1 in its way until it is planned: agent 1 (1 -> 4) is planned first instead
+    adj = [[1], [0, 2], [1, 3, 4], [2], [2]]
+    inst = MapfInstance(adj, [0, 1], [3, 4], time_model="unit")
+    paths, failed = plan_in_order(inst, [0, 1], [0])
+    assert failed is None
+    assert validate(inst, None, None, paths) == []
 
 
 def test_initial_order_and_plan_in_order_report_the_failed_agent():

@@ -2,12 +2,14 @@
 
 Agents are planned one at a time in a priority order; each gets its earliest path that avoids
 every path planned before it (:func:`~agents.search.mapf.sipp.sipp`), then its path is
-reserved (:class:`~agents.search.mapf.sipp.IntervalTable`). Prioritised planning is
-incomplete: an agent may find no path because earlier agents block it (typically one that
-passes through its start before it can leave, or parks across its way). When that happens the
-order is changed (the failed agent moves to the front) and planning starts again, up to
-``restarts`` times. The order is a function of the instance alone, so the same instance gives
-the same plan on any machine.
+reserved (:class:`~agents.search.mapf.sipp.IntervalTable`). The agents not planned yet wait
+at their starts, so their starts are kept free too (held) until they are planned; agents that
+park at or near another agent's start come after it in the order (:func:`initial_order`); an
+agent shut in by waiting agents is planned after them (:func:`plan_in_order`). Prioritised
+planning is incomplete: an agent may still find no path because earlier agents block it. When
+that happens the order is changed (the failed agent moves to the front) and planning starts
+again, up to ``restarts`` times. The order is a function of the instance alone, so the same
+instance gives the same plan on any machine.
 
 The budget is counted in work: SIPP expansions over all agents and restarts
 (``expansion_limit``); the wall-clock ``time_limit`` is only a safety net. Reaching either
