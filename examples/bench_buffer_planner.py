@@ -16,8 +16,8 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
 
   For each solver other than ``ecbs`` that ran beside it, the ratio of its sum of costs to
   ECBS's on the problems both solved (median and worst). ``--agents max`` stands for the most
-  agents the problem generator can place on the graph at that difficulty (found by bisection,
-  which takes minutes: 225 on the default graph at ``hard``).
+  agents the problem generator can place in each of the P problems at that difficulty (found by
+  bisection, which takes minutes).
 
 Planning time includes attaching the starts and goals with the critics. The machine's load
 average is printed first: every solver call is budgeted in expansions (the planner's default
@@ -49,11 +49,12 @@ SOLVER_OPTIONS = {
 }
 
 
-def most_agents(setup: EvaluationSetup, difficulty: str, seed: int, lo: int = 1, hi: int = 1024) -> int:
-    """The most agents :func:`make_problems` places for one problem (bisection)."""
+def most_agents(setup: EvaluationSetup, difficulty: str, n_problems: int, seed: int, lo: int = 1,
+                hi: int = 512) -> int:
+    """The most agents :func:`make_problems` places in each of ``n_problems`` problems (bisection)."""
     def fits(k: int) -> bool:
         try:
-            make_problems(setup, difficulty, k, 1, seed=seed)
+            make_problems(setup, difficulty, k, n_problems, seed=seed)
             return True
         except RuntimeError:
             return False
@@ -94,8 +95,8 @@ def main() -> None:
     counts = []
     for a in args.agents:
         if a == "max":
-            k = most_agents(setup, args.difficulty, args.seed)
-            print(f"most agents placed at difficulty {args.difficulty}: {k}")
+            k = most_agents(setup, args.difficulty, args.problems, args.seed)
+            print(f"most agents placed in {args.problems} problems at difficulty {args.difficulty}: {k}")
             counts.append(k)
         else:
             counts.append(int(a))
