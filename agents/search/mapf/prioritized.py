@@ -20,7 +20,7 @@ from __future__ import annotations
 import collections
 import heapq
 import time as _time
-from typing import List, Optional, Sequence, Set
+from typing import List, Optional, Sequence, Set, Tuple
 
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
@@ -70,7 +70,8 @@ def initial_order(inst: MapfInstance) -> List[int]:
 
 
 def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
-                  budget: Optional[int] = None, deadline: Optional[float] = None, start_hold: int = 0):
+                  budget: Optional[int] = None, deadline: Optional[float] = None,
+                  start_hold: int = 0) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
     """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
 
     ``paths[i]`` is agent ``i``'s events. An agent not planned yet waits at its start, so its
@@ -79,8 +80,9 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     in the first steps, before they can get away). Only an agent that must park at or near a
     held start sees that hold end after ``start_hold`` steps (the waiting agent then has to be
     gone by the time it arrives). An agent that finds no path while shut in by agents still
-    waiting at their starts is put back behind them, once. Raises :class:`~agents.search.mapf.sipp.BudgetExceeded`
-    past ``budget`` expansions and ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
+    waiting at their starts is put back behind them, once. Raises
+    :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
+    ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
     """
     table = IntervalTable(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
