@@ -74,7 +74,7 @@ class EvaluationSetup:
     d_max: float = 7.0
     proximity_radius: float = 1.5
     suboptimality: float = 1.1
-    cbs_time_limit: float = 5.0
+    cbs_time_limit: float = 30.0  # a safety net: the planner stops on its expansion budget first
     min_separation: float = 2.5
     max_edges: Optional[int] = None
     shortest: np.ndarray = field(init=False, repr=False)

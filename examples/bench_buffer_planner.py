@@ -4,19 +4,35 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
 
 - the time to build the graph for N observations with the full critic ensembles (3 distance
   + 3 cost critics; D and C for all N^2 pairs, then pruning at d_max = 7);
-- CBS for K agents on that graph (learned proximity radius 1.5, no cost pruning): median and
-  worst planning time over P problems (hard difficulty), with the status counts, for optimal
-  CBS and ECBS with w = 1.1 (the planner's default) with durative edges, and for optimal CBS
-  with unit-time edges (the paper's time model: every edge one step), all without the
-  planner's fallback. Planning time includes attaching the starts and goals with the critics.
+- for K agents on that graph (learned proximity radius 1.5, no cost pruning, durative edges):
+  median and worst planning time over P problems (hard difficulty), the status counts and the
+  median sum of costs, per solver, without the planner's fallback:
 
-Run: ``python examples/bench_buffer_planner.py [--nodes 1000] [--agents 5 10 20] [--problems 20]``
+  - ``auto``: the planner's default (ECBS w = 1.1 up to 20 agents, prioritised planning with
+    safe intervals above);
+  - ``prioritized``: prioritised planning alone;
+  - ``ecbs``: ECBS w = 1.1; ``cbs``: optimal CBS; ``cbs-unit``: optimal CBS with unit-time
+    edges (the paper's time model: every edge one step).
+
+  For each solver other than ``ecbs`` that ran beside it, the ratio of its sum of costs to
+  ECBS's on the problems both solved (median and worst). ``--agents max`` stands for the most
+  agents the problem generator can place in each of the P problems at that difficulty (found by
+  bisection, which takes minutes).
+
+Planning time includes attaching the starts and goals with the critics. The machine's load
+average is printed first: every solver call is budgeted in expansions (the planner's default
+``expansion_limit``), so the statuses and costs do not depend on the load, but the times do.
+
+Run: ``python examples/bench_buffer_planner.py [--nodes 1000] [--agents 20 100 200 max] [--problems 20]
+[--solvers auto ecbs]``
 """
 from __future__ import annotations
 
 import argparse
 import collections
+import os
 import time
+from typing import Dict, List
 
 import numpy as np
 import torch
@@ -24,17 +40,47 @@ import torch
 from agents.search.graph import WaypointGraph
 from baselines.evaluation import EvaluationSetup, make_problems
 
+SOLVER_OPTIONS = {
+    "auto": dict(solver="auto"),
+    "prioritized": dict(solver="prioritized"),
+    "ecbs": dict(solver="cbs", suboptimality=1.1),
+    "cbs": dict(solver="cbs", suboptimality=1.0),
+    "cbs-unit": dict(solver="cbs", suboptimality=1.0, time_model="unit"),
+}
+
+
+def most_agents(setup: EvaluationSetup, difficulty: str, n_problems: int, seed: int, lo: int = 1,
+                hi: int = 512) -> int:
+    """The most agents :func:`make_problems` places in each of ``n_problems`` problems (bisection)."""
+    def fits(k: int) -> bool:
+        try:
+            make_problems(setup, difficulty, k, n_problems, seed=seed)
+            return True
+        except RuntimeError:
+            return False
+
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if fits(mid):
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--nodes", type=int, default=1000)
-    ap.add_argument("--agents", type=int, nargs="+", default=[20])
+    ap.add_argument("--agents", nargs="+", default=["20"], help="agent counts, or 'max'")
     ap.add_argument("--problems", type=int, default=20)
     ap.add_argument("--difficulty", default="hard")
-    ap.add_argument("--time-limit", type=float, default=10.0)
+    ap.add_argument("--solvers", nargs="+", default=["auto", "ecbs"], choices=sorted(SOLVER_OPTIONS))
+    ap.add_argument("--time-limit", type=float, default=120.0,
+                    help="seconds per solver call: a safety net behind the planner's expansion budget")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     torch.set_num_threads(1)
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
 
     setup = EvaluationSetup.build(n_nodes=args.nodes, seed=args.seed)
     agent = setup.models["unconstrained"]
@@ -46,19 +92,39 @@ def main() -> None:
     print(f"graph build, N={args.nodes}: {min(builds):.2f} s (best of 3; {graph.n_edges} edges, "
           f"{graph.n_edges / args.nodes:.0f} per node)")
 
-    for k in args.agents:
+    counts = []
+    for a in args.agents:
+        if a == "max":
+            k = most_agents(setup, args.difficulty, args.problems, args.seed)
+            print(f"most agents placed in {args.problems} problems at difficulty {args.difficulty}: {k}")
+            counts.append(k)
+        else:
+            counts.append(int(a))
+    for k in counts:
         problems = make_problems(setup, args.difficulty, k, args.problems, seed=args.seed)
-        for w, time_model in ((1.0, "durative"), (1.1, "durative"), (1.0, "unit")):
-            planner = setup.planner.with_options(suboptimality=w, time_limit=args.time_limit,
-                                                 fallback_suboptimality=None, time_model=time_model)
+        socs: Dict[str, List[float]] = {}
+        for name in args.solvers:
+            planner = setup.planner.with_options(time_limit=args.time_limit, fallback_suboptimality=None,
+                                                 **SOLVER_OPTIONS[name])
             times, status = [], collections.Counter()
+            socs[name] = []
             for p in problems:
                 plan = planner.plan(setup.observations[p.start_nodes], setup.observations[p.goal_nodes])
                 times.append(plan.planning_time)
                 status[plan.status] += 1
-            name = ("optimal CBS" if w == 1.0 else f"ECBS w={w}") + f", {time_model} edges"
+                socs[name].append(plan.soc if plan.solved else np.nan)
+            solved = np.array(socs[name], dtype=float)
+            soc = f"median SOC {np.nanmedian(solved):.0f}" if np.isfinite(solved).any() else "no plan"
             print(f"{name}, {k} agents, {args.difficulty}: median {np.median(times):.2f} s, "
-                  f"worst {max(times):.2f} s (limit {args.time_limit:g} s), {dict(status)}")
+                  f"worst {max(times):.2f} s (limit {args.time_limit:g} s), {dict(status)}, {soc}", flush=True)
+        if "ecbs" in socs:
+            ref = np.array(socs["ecbs"], dtype=float)
+            for name, vals in socs.items():
+                both = np.isfinite(ref) & np.isfinite(np.array(vals, dtype=float))
+                if name != "ecbs" and both.any():
+                    r = np.array(vals, dtype=float)[both] / ref[both]
+                    print(f"  {name} / ecbs sum of costs, {k} agents, {both.sum()} problems both solved: "
+                          f"median {np.median(r):.3f}, worst {r.max():.3f}")
 
 
 if __name__ == "__main__":

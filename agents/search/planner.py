@@ -10,7 +10,9 @@ and the :class:`~agents.search.controller.WaypointController`:
 3. edges are kept where ``D < d_max`` and ``C < c_max``; an endpoint always keeps its
    ``endpoint_edges`` cheapest edges, so that an agent that starts (or ends) in a costly
    place is not cut off;
-4. CBS plans collision-free timed paths. Under the default ``"durative"`` time model an edge
+4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
+   for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
+   see :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
    takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
    they are at nodes whose predicted distance (either direction) is below
    ``proximity_radius`` (buffer nodes are distinct points, so "same node" alone would miss
@@ -23,6 +25,9 @@ that agent's start and goal only (doubling until a path exists; ``MultiAgentPlan
 reports the largest value used), so the rest of the graph stays as safe as asked; with
 ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
 call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
+Every solver call is budgeted in expansions (``expansion_limit``,
+``prioritized_expansions_per_agent``), with a wall-clock limit
+(``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -37,12 +42,25 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .cbs import CBSResult, solve_cbs
+from .cbs import CBSResult, CBSSolver
 from .controller import AgentPlan
 from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
+from .mapf.instance import MapfInstance
+from .mapf.prioritized import solve_prioritized
 from .mapf_instance import Proximity
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
+
+#: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
+SOLVERS = ("auto", "cbs", "prioritized")
+#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above.
+AUTO_SEARCH_AGENTS = 20
+#: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
+#: buffer graph on an idle machine
+DEFAULT_EXPANSION_LIMIT = 50_000
+#: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
+#: 150,000 to 190,000 safe-interval expansions
+DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_000
 
 
 @dataclass
@@ -65,6 +83,8 @@ class MultiAgentPlan:
         predicted_cost: per agent, the predicted cost of its route (sum over its edges).
         problem: the problem graph the plan was made on (node observations, dense ``D`` and
             ``C``, the pruned graph), for execution, plots and inspection.
+        solver: which solver made the plan (``"cbs"``, ``"prioritized"`` or ``"single"``;
+            ``""`` when none ran).
     """
 
     status: str
@@ -80,6 +100,7 @@ class MultiAgentPlan:
     message: str = ""
     predicted_cost: List[float] = field(default_factory=list)
     problem: Optional[ProblemGraph] = field(default=None, repr=False)
+    solver: str = ""
 
     @property
     def solved(self) -> bool:
@@ -173,7 +194,7 @@ def waypoints_from_paths(paths: Sequence[Sequence[Tuple[int, int]]]):
 
 
 class BufferPlanner:
-    """Plans waypoints for several agents with CBS on a graph of observations.
+    """Plans waypoints for several agents (CBS / ECBS, or prioritised planning) on a graph of observations.
 
     Args:
         observations: the graph's node observations, ``(N, ...)``.
@@ -190,7 +211,19 @@ class BufferPlanner:
             one step per edge).
         suboptimality: 1 for optimal CBS, ``w > 1`` for ECBS within ``w`` of optimal (default
             1.1: optimal CBS is often too slow with 20 agents on a dense buffer graph).
-        time_limit: seconds for one CBS call.
+        solver: ``"cbs"`` (CBS, or ECBS with ``suboptimality > 1``), ``"prioritized"``
+            (prioritised planning with safe-interval path planning,
+            :func:`~agents.search.mapf.prioritized.solve_prioritized`: agents one after
+            another, each on its earliest path around the earlier ones; fast with hundreds of
+            agents, cost not bounded, can fail where a plan exists) or ``"auto"`` (default):
+            ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``.
+        expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
+            (space-time states; ``None``: none). Counted in work, not seconds, so the same
+            problem gives the same plan (or the same timeout) on an idle and a loaded machine.
+        prioritized_expansions_per_agent: the work budget of prioritised planning, in
+            safe-interval expansions over all agents and restarts, per agent (``None``: none).
+        time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
+            Either ends the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
             infeasible); see :meth:`_connect`.
         fallback_suboptimality: if CBS runs out of time, one more try with this (larger)
@@ -215,7 +248,10 @@ class BufferPlanner:
         proximity_radius: Optional[float] = 1.5,
         time_model: str = "durative",
         suboptimality: float = 1.1,
-        time_limit: float = 5.0,
+        solver: str = "auto",
+        expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
+        prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
+        time_limit: float = 30.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
         budget_labels: int = 2_000,
@@ -243,6 +279,18 @@ class BufferPlanner:
         self.proximity_radius = proximity_radius
         self.time_model = time_model
         self.suboptimality = float(suboptimality)
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+        for name, lim in (("expansion_limit", expansion_limit),
+                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent)):
+            if lim is not None and not (isinstance(lim, (int, np.integer)) and lim >= 1):
+                raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
+        if not time_limit > 0:
+            raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+        self.solver = solver
+        self.expansion_limit = None if expansion_limit is None else int(expansion_limit)
+        self.prioritized_expansions_per_agent = (None if prioritized_expansions_per_agent is None
+                                                 else int(prioritized_expansions_per_agent))
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
@@ -276,6 +324,8 @@ class BufferPlanner:
         return dict(
             d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
+            solver=self.solver, expansion_limit=self.expansion_limit,
+            prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
             max_edges=self.max_edges)
@@ -349,22 +399,38 @@ class BufferPlanner:
         else:
             durations.data = np.ones_like(durations.data)
         if k == 1:  # one agent has nobody to conflict with: CBS's answer is the shortest timed path
-            res = self._single_agent_path(durations, s_ids[0], g_ids[0])
+            res, used = self._single_agent_path(durations, s_ids[0], g_ids[0]), "single"
         else:
-            prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
-            res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
-                            suboptimality=self.suboptimality, time_limit=self.time_limit)
-        fb = self.fallback_suboptimality
-        if k > 1 and res.status == "timeout" and fb is not None and fb > self.suboptimality:
-            res = solve_cbs(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox,
-                            suboptimality=fb, time_limit=self.time_limit)
+            res, used = self._solve(durations, s_ids, g_ids, D)
         out = MultiAgentPlan(res.status, soc=res.soc, makespan=res.makespan, c_max=c_max, cbs=res,
-                             message=res.message, problem=problem)
+                             message=res.message, problem=problem, solver=used)
         if res.solved and res.paths is not None:
             out.nodes, out.depart_times, out.node_arrivals, out.arrival_times = waypoints_from_paths(res.paths)
             out.predicted_cost = [self._route_cost(C, nodes + [g]) for nodes, g in zip(out.nodes, g_ids)]
         out.planning_time = time.perf_counter() - t0
         return out
+
+    def _solve(self, durations: sparse.csr_matrix, s_ids, g_ids, D: np.ndarray) -> Tuple[CBSResult, str]:
+        """Run the solver ``self.solver`` picks for this many agents; ``(result, solver used)``."""
+        k = len(s_ids)
+        prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
+        inst = MapfInstance(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox)
+        solver = self.solver
+        if solver == "auto":
+            solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
+        if solver == "prioritized":
+            # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
+            # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
+            per_agent = self.prioritized_expansions_per_agent
+            budget = None if per_agent is None else per_agent * k
+            return solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit), solver
+        res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
+                        expansion_limit=self.expansion_limit).solve()
+        fb = self.fallback_suboptimality
+        if res.status == "timeout" and fb is not None and fb > self.suboptimality:
+            res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
+                            expansion_limit=self.expansion_limit).solve()
+        return res, "cbs"
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""
@@ -417,4 +483,5 @@ class BufferPlanner:
         return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max)
 
 
-__all__ = ["BufferPlanner", "MultiAgentPlan", "PairwiseFn", "direct_plans", "waypoints_from_paths"]
+__all__ = ["AUTO_SEARCH_AGENTS", "BufferPlanner", "MultiAgentPlan", "PairwiseFn", "SOLVERS", "direct_plans",
+           "waypoints_from_paths"]

@@ -112,9 +112,12 @@ def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name):
         if not kw:  # merged, the group's search proves it: the message names the agents and why
             assert "collide" in res.message and "alone" in res.message, res.message
         assert time.perf_counter() - t0 < 3.0
-    # without merging the search cannot prove it and runs into its limit
-    res = solve_cbs(adj, starts, goals, time_limit=10, node_limit=100, merge_threshold=None)
+    # without merging (and without the exhaustive check before the search, which decides these
+    # tiny instances at once) the search cannot prove it and runs into its limit
+    res = solve_cbs(adj, starts, goals, time_limit=10, node_limit=100, merge_threshold=None, joint_check_states=0)
     assert res.status == "timeout"
+    res = solve_cbs(adj, starts, goals, time_limit=10, node_limit=100, merge_threshold=None)
+    assert res.status == "infeasible" and "joint configurations" in res.message
 
 
 @pytest.mark.parametrize("seed", range(12))

@@ -190,3 +190,55 @@ def test_a_single_agent_gets_the_path_cbs_would_give(time_model):
     ref = solve_cbs(dur, [n], [n + 1], time_model=time_model, suboptimality=1.0)
     assert plan.soc == ref.soc
     assert validate(dur, [n], [n + 1], plan.cbs.paths, time_model=time_model) == []
+
+
+def _crossing_problem(k, n=12):
+    """``k`` agents on an ``n x n`` grid of points, from the left columns to the right ones."""
+    rows = np.arange(k) % n
+    cols = np.arange(k) // n
+    starts = np.stack([cols * 1.0, rows * 1.0], axis=1) + 0.25
+    goals = np.stack([(n - 1 - cols) * 1.0, rows[::-1] * 1.0], axis=1) + 0.25
+    return starts, goals
+
+
+def _validate_plan(plan, k, radius):
+    n = len(plan.problem.observations) - 2 * k
+    dur = plan.problem.graph.distance.copy()
+    dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
+    P = plan.problem.D.copy()
+    for lo in (n, n + k):
+        P[lo:lo + k, lo:lo + k] = np.inf
+    return validate(dur, list(range(n, n + k)), list(range(n + k, n + 2 * k)), plan.cbs.paths,
+                    time_model="durative", proximity=Proximity(P, radius))
+
+
+def test_auto_solver_picks_prioritized_planning_for_many_agents():
+    pts = grid_points(12)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=0.9)
+    starts, goals = _crossing_problem(24)
+    plan = planner.plan(starts, goals)
+    assert plan.solved and plan.solver == "prioritized", plan.message
+    assert _validate_plan(plan, 24, 0.9) == []
+    assert plan.soc == sum(plan.arrival_times)
+    few = planner.plan(starts[:3], goals[:3])
+    assert few.solver == "cbs" and few.status in ("optimal", "suboptimal")
+    forced = planner.with_options(solver="prioritized").plan(starts[:3], goals[:3])
+    assert forced.solver == "prioritized" and _validate_plan(forced, 3, 0.9) == []
+    assert forced.soc >= planner.with_options(suboptimality=1.0).plan(starts[:3], goals[:3]).soc
+
+
+def test_planner_budget_is_counted_in_expansions():
+    pts = grid_points(12)
+    starts, goals = _crossing_problem(24)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=0.9, expansion_limit=30,
+                           prioritized_expansions_per_agent=1, fallback_suboptimality=None)
+    plan = planner.plan(starts, goals)
+    assert plan.status == "timeout" and "expansion limit of 24" in plan.message  # 1 per agent
+    plan = planner.plan(starts[:5], goals[:5])
+    assert plan.status == "timeout" and "expansion limit of 30" in plan.message
+    with pytest.raises(ValueError, match="solver"):
+        make_planner(pts, euclid_pairwise(), solver="lacam")
+    with pytest.raises(ValueError, match="expansion_limit"):
+        make_planner(pts, euclid_pairwise(), expansion_limit=0)
+    with pytest.raises(ValueError, match="prioritized_expansions_per_agent"):
+        make_planner(pts, euclid_pairwise(), prioritized_expansions_per_agent=2.5)

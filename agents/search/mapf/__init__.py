@@ -46,10 +46,25 @@ Algorithm
     at most ``w`` times the optimum). ``vanilla=True`` turns prioritisation, bypass, target and
     symmetry reasoning, merging and the heuristic off.
 
+Many agents
+    :func:`solve_prioritized`: prioritised planning, each agent on its earliest path around
+    the earlier ones by safe-interval path planning (SIPP, :mod:`agents.search.mapf.sipp`),
+    restarted with the failed agent first where it gets stuck; fast with hundreds of agents,
+    its cost is not bounded and it can fail where a plan exists. Budgets of every solver can
+    be counted in expansions (``expansion_limit``), so a result does not depend on the
+    machine's load.
+
+Feasibility
+    :func:`joint_feasible`: an exhaustive search over the agents' joint configurations that
+    decides whether any plan exists on small instances; :class:`CBSSolver` runs it before
+    searching where there are at most ``joint_check_states`` configurations, so a small
+    impossible instance is reported ``"infeasible"`` at once.
+
 Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
     :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
-    :func:`validate` to check any solution independently, the constraint and conflict types,
+    :func:`validate` to check any solution independently, :func:`solve_prioritized`,
+    :func:`joint_feasible`, the constraint and conflict types,
     and the MovingAI benchmark loaders :func:`load_map`, :func:`load_scen`,
     :func:`load_instance`, :func:`grid_graph`.
 
@@ -61,8 +76,9 @@ Modules, one concept each
     (timed paths and reservations), ``conflicts`` (conflict types and detection),
     ``lowlevel`` (space-time A*, focal search, earliest arrival), ``coupled`` (the joint
     search of a meta-agent), ``successors`` (what the low-level searches share),
-    ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``
-    and ``movingai`` (benchmark files).
+    ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``,
+    ``movingai`` (benchmark files), ``sipp`` (safe intervals and the single-agent search over
+    them), ``prioritized`` (prioritised planning) and ``feasibility`` (the exhaustive check).
 """
 from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict
 from .constraints import (
@@ -79,8 +95,10 @@ from .constraints import (
     compile_constraints,
 )
 from .ctnode import CTNode
+from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
+from .prioritized import solve_prioritized
 from .result import STATUSES, CBSResult, CBSStats
 from .solver import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_MERGE_THRESHOLD, HEURISTICS, CBSSolver, solve_cbs
 from .validate import validate
@@ -91,6 +109,6 @@ __all__ = [
     "EdgeConstraint", "FOREVER", "GridInstance",
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
     "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
-    "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "load_instance", "load_map",
-    "load_scen", "solve_cbs", "validate",
+    "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
+    "load_map", "load_scen", "solve_cbs", "solve_prioritized", "validate",
 ]

@@ -65,7 +65,7 @@ class SearchContext:
             if base is not None:
                 self.memory_cap = base + int(options.memory_limit_mb * (1 << 20))
         self._checks = 0
-        #: ``"time"`` or ``"memory"``: which limit ended the search
+        #: ``"time"``, ``"work"`` or ``"memory"``: which limit ended the search
         self.stop_reason = "time"
         self.counter = Counter()
         #: (agent, constraint content) -> its MDD
@@ -130,8 +130,13 @@ class SearchContext:
         return now + 0.25 * max(0.0, self.deadline - now)
 
     def check_time(self) -> None:
-        """Raise :class:`SearchTimeout` past the deadline or (checked now and then) the memory cap."""
+        """Raise :class:`SearchTimeout` past the deadline, the expansion limit or (checked now and
+        then) the memory cap."""
         if _time.perf_counter() > self.deadline:
+            raise SearchTimeout
+        limit = self.opt.expansion_limit
+        if limit is not None and self.counter.expanded > limit:
+            self.stop_reason = "work"
             raise SearchTimeout
         if self.memory_cap is not None:
             self._checks += 1

@@ -19,6 +19,7 @@ from .cbs import CBSSearch
 from .constraints import EMPTY
 from .context import SearchContext
 from .ecbs import ECBSSearch
+from .feasibility import infeasible_component
 from .instance import GraphLike, MapfInstance, ProximityLike
 from .lowlevel import SearchTimeout
 from .result import CBSResult
@@ -30,6 +31,8 @@ HEURISTICS = ("none", "cg", "dg", "wdg")
 DEFAULT_MERGE_THRESHOLD = 10
 #: default ``merge_space_limit`` of meta-agent CBS (joint configurations of a meta-agent)
 DEFAULT_MERGE_SPACE_LIMIT = 2_000
+#: default ``joint_check_states``: joint configurations the exhaustive feasibility check may enumerate
+DEFAULT_JOINT_CHECK_STATES = 20_000
 #: default ``memory_limit_mb``: how much a search may grow the process (MiB)
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
@@ -90,12 +93,21 @@ class CBSSolver:
             constraint-tree node). ``None`` turns the guard off; where the resident size cannot
             be read (no ``/proc`` and no :mod:`resource`) there is no guard.
         node_limit: high-level expansions; the search ends with status ``"timeout"``.
+        expansion_limit: low-level expansions over the whole solve (a work budget, checked
+            between high-level steps, so the same input stops at the same point on an idle and
+            a loaded machine); the search ends with status ``"timeout"``. ``None``: no limit.
         pair_node_limit: high-level expansions of each two-agent search of the WDG heuristic
             (past it the pair's lower bound is used, which keeps the heuristic admissible); an
             agent pair whose searches keep reaching it gets half of it each time, down to 8.
         pair_check_states: an exact two-agent feasibility check of every pair (which can prove
             infeasibility) runs before the search when ``pairs * N**2`` is at most this, and
             once the search has run for a second when it is at most 100 times this.
+        joint_check_states: where the joint configurations (placements on distinct nodes) of
+            the agents of one connected part of the graph number at most this, an exhaustive
+            search over them decides before the search whether those agents can reach their
+            goals (:func:`~agents.search.mapf.feasibility.infeasible_component`), so a small
+            impossible instance, or an impossible small enclosed part of a larger one, is
+            reported ``"infeasible"`` at once instead of after the time limit (0: never).
         merge_threshold: meta-agent CBS (MA-CBS), unit time only: once the splits on conflicts
             between two agents (or meta-agents: summed over their members) number more than
             this in the search, the node being split merges them into one meta-agent instead,
@@ -179,8 +191,10 @@ class CBSSolver:
         time_limit: float = 60.0,
         memory_limit_mb: Optional[float] = DEFAULT_MEMORY_LIMIT_MB,
         node_limit: Optional[int] = None,
+        expansion_limit: Optional[int] = None,
         pair_node_limit: int = 64,
         pair_check_states: int = 20_000,
+        joint_check_states: int = DEFAULT_JOINT_CHECK_STATES,
         merge_threshold: Optional[int] = DEFAULT_MERGE_THRESHOLD,
         merge_node_limit: int = 100_000,
         merge_max_agents: int = 4,
@@ -212,6 +226,8 @@ class CBSSolver:
             raise ValueError(f"memory_limit_mb must be > 0 (or None for no limit), got {memory_limit_mb!r}")
         if node_limit is not None and node_limit < 0:
             raise ValueError(f"node_limit must be >= 0, got {node_limit!r}")
+        if expansion_limit is not None and expansion_limit < 0:
+            raise ValueError(f"expansion_limit must be >= 0, got {expansion_limit!r}")
         self.suboptimality = float(suboptimality)
         if merge_threshold is not None and merge_threshold < 0:
             raise ValueError(f"merge_threshold must be >= 0 (or None for no merging), got {merge_threshold!r}")
@@ -241,8 +257,12 @@ class CBSSolver:
         self.time_limit = float(time_limit)
         self.memory_limit_mb = None if memory_limit_mb is None else float(memory_limit_mb)
         self.node_limit = node_limit
+        self.expansion_limit = expansion_limit
         self.pair_node_limit = int(pair_node_limit)
         self.pair_check_states = int(pair_check_states)
+        if joint_check_states < 0:
+            raise ValueError(f"joint_check_states must be >= 0, got {joint_check_states!r}")
+        self.joint_check_states = int(joint_check_states)
         self.merge_threshold = None if merge_threshold is None else int(merge_threshold)
         self.merge_node_limit = int(merge_node_limit)
         self.merge_max_agents = int(merge_max_agents)
@@ -273,7 +293,11 @@ class CBSSolver:
                             return (f"the {what}s of agents {a} and {b} ({nodes[a]}, {nodes[b]}) are closer "
                                     "than the proximity radius")
         if self._pair_check_size() <= self.pair_check_states:
-            return self._pair_check()
+            reason = self._pair_check()
+            if reason is not None:
+                return reason
+        if self.joint_check_states > 0:
+            return infeasible_component(inst, self.joint_check_states)
         return None
 
     def _pair_check_size(self) -> int:
@@ -348,7 +372,9 @@ class CBSSolver:
             status, node = run()
         except SearchTimeout:
             lb = search.lower_bound or None
-            if ctx.stop_reason == "memory":
+            if ctx.stop_reason == "work":
+                msg = f"expansion limit of {self.expansion_limit} low-level expansions reached"
+            elif ctx.stop_reason == "memory":
                 msg = (f"memory limit reached: the search grew the process by more than "
                        f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
             else:

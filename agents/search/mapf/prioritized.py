@@ -1,0 +1,210 @@
+"""Prioritised planning (PP) with safe-interval path planning: many agents, fast, not optimal.
+
+Agents are planned one at a time in a priority order; each gets its earliest path that avoids
+every path planned before it (:func:`~agents.search.mapf.sipp.sipp`), then its path is
+reserved (:class:`~agents.search.mapf.sipp.IntervalTable`). The agents not planned yet wait
+at their starts, so their starts are kept free too (held) until they are planned; agents that
+park at or near another agent's start come after it in the order (:func:`initial_order`); an
+agent shut in by waiting agents is planned after them (:func:`plan_in_order`). Prioritised
+planning is incomplete: an agent may still find no path because earlier agents block it. When
+that happens the order is changed (the failed agent moves to the front) and planning starts
+again, up to ``restarts`` times. The order is a function of the instance alone, so the same
+instance gives the same plan on any machine.
+
+The budget is counted in work: SIPP expansions over all agents and restarts
+(``expansion_limit``); the wall-clock ``time_limit`` is only a safety net. Reaching either
+returns status ``"timeout"`` (the message says which).
+"""
+from __future__ import annotations
+
+import collections
+import heapq
+import time as _time
+from typing import List, Optional, Sequence, Set, Tuple
+
+from .instance import UNREACHABLE, MapfInstance
+from .result import CBSResult, CBSStats
+from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
+
+#: default SIPP expansions of one solve, over all agents and restarts
+DEFAULT_EXPANSION_LIMIT = 2_000_000
+#: default ``start_hold``, in moves of the graph's mean duration (30 steps on the 1000-node
+#: buffer graph, whose edges take 5 steps on average; 6 on a unit-time grid)
+DEFAULT_START_HOLD_MOVES = 6
+
+
+def _blocks_start(inst: MapfInstance, goal: int, start: int) -> bool:
+    """Whether an agent parked at ``goal`` would block an agent waiting at ``start``."""
+    near = inst.near_mat
+    return goal == start or (near is not None and bool(near[goal, start]))
+
+
+def initial_order(inst: MapfInstance) -> List[int]:
+    """Far agents first (decreasing distance to the goal, ties by index: a long path is the
+    hardest to fit among others), except that an agent whose goal is at or near another
+    agent's start comes after that agent (it could not park before the other has left).
+    Agents on a cycle of such precedences keep the far-first order among themselves, last."""
+    k = inst.n_agents
+    h = inst.h
+    rank = sorted(range(k), key=lambda i: (-h[i][inst.starts[i]], i))
+    pos = {a: r for r, a in enumerate(rank)}
+    after: List[List[int]] = [[] for _ in range(k)]
+    waiting = [0] * k
+    for i in range(k):
+        for j in range(k):
+            if i != j and _blocks_start(inst, inst.goals[i], inst.starts[j]):
+                after[j].append(i)  # i parks where j waits: j goes first
+                waiting[i] += 1
+    ready = [(pos[i], i) for i in range(k) if not waiting[i]]
+    heapq.heapify(ready)
+    order: List[int] = []
+    while ready:
+        _, j = heapq.heappop(ready)
+        order.append(j)
+        for i in after[j]:
+            waiting[i] -= 1
+            if not waiting[i]:
+                heapq.heappush(ready, (pos[i], i))
+    placed = set(order)
+    return order + [i for i in rank if i not in placed]
+
+
+def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
+                  budget: Optional[int] = None, deadline: Optional[float] = None,
+                  start_hold: int = 0) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
+    """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
+
+    ``paths[i]`` is agent ``i``'s events. An agent not planned yet waits at its start, so its
+    start (and the nodes near it) is held for it: earlier agents keep away from it until it is
+    planned (without this, on a dense buffer graph most later agents find their start passed by
+    in the first steps, before they can get away). Only an agent that must park at or near a
+    held start sees that hold end after ``start_hold`` steps (the waiting agent then has to be
+    gone by the time it arrives). An agent that finds no path while shut in by agents still
+    waiting at their starts is put back behind them, once. Raises
+    :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
+    ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
+    """
+    table = IntervalTable(inst)
+    paths: List[Optional[Events]] = [None] * inst.n_agents
+    for i in order:
+        table.hold(i, inst.starts[i], FOREVER)
+    unplanned = set(order)
+    queue = collections.deque(order)
+    deferred: Set[int] = set()
+    while queue:
+        if deadline is not None and _time.perf_counter() > deadline:
+            raise TimeoutError
+        i = queue.popleft()
+        table.release(i)
+        unplanned.discard(i)
+        shortened = [j for j in unplanned if _blocks_start(inst, inst.goals[i], inst.starts[j])]
+        for j in shortened:
+            table.release(j)
+            table.hold(j, inst.starts[j], start_hold)
+        explored: Set[int] = set()
+        p = sipp(inst, i, table, budget, counter, explored)
+        for j in shortened:  # for everybody else, the hold lasts until j is planned
+            table.release(j)
+            table.hold(j, inst.starts[j], FOREVER)
+        if p is not None:
+            paths[i] = p
+            table.reserve(i, p)
+            continue
+        # shut in by agents still waiting at their starts? plan them first, then try again
+        region = set(explored)
+        region.add(inst.starts[i])
+        for u in explored:
+            region.update(inst.succ[u])
+        waiting: Set[int] = set()
+        for x in region:
+            waiting |= table.holders(x)
+        if i in deferred or not waiting:
+            return None, i
+        deferred.add(i)
+        table.hold(i, inst.starts[i], FOREVER)
+        unplanned.add(i)
+        ahead = [a for a in queue if a in waiting]
+        for a in ahead:
+            queue.remove(a)
+        queue.appendleft(i)
+        queue.extendleft(reversed(ahead))
+    return paths, None
+
+
+def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
+                      expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
+                      time_limit: Optional[float] = None,
+                      order: Optional[Sequence[int]] = None,
+                      start_hold: Optional[int] = None) -> CBSResult:
+    """Prioritised planning with SIPP and priority restarts; a :class:`CBSResult`.
+
+    Args:
+        inst: the instance (either time model, with or without proximity).
+        restarts: how many times a failed agent may be moved to the front and planning redone.
+        expansion_limit: SIPP expansions over the whole solve (``None``: no limit).
+        time_limit: wall-clock seconds, a safety net (``None``: none).
+        order: the first priority order (default :func:`initial_order`).
+        start_hold: steps ``0 .. start_hold`` for which an agent not planned yet keeps its start
+            against an agent that must park at or near it (see :func:`plan_in_order`); default
+            ``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration.
+
+    Returns:
+        status ``"suboptimal"`` with paths (their sum of costs is not bounded), ``"timeout"``
+        (budget, time or restarts used up; the message says which), or ``"infeasible"`` when
+        some agent's goal cannot be reached from its start even alone.
+    """
+    if start_hold is None:
+        data = inst.durations.data
+        start_hold = int(round(DEFAULT_START_HOLD_MOVES * (float(data.mean()) if len(data) else 1.0)))
+    if start_hold < 0:
+        raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
+    if restarts < 0:
+        raise ValueError(f"restarts must be >= 0, got {restarts!r}")
+    if expansion_limit is not None and expansion_limit < 1:
+        raise ValueError(f"expansion_limit must be >= 1 or None, got {expansion_limit!r}")
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
+    t0 = _time.perf_counter()
+    stats = CBSStats()
+    counter = [0]
+
+    def finish(res: CBSResult) -> CBSResult:
+        stats.ll_expanded = counter[0]
+        stats.runtime_s = _time.perf_counter() - t0
+        res.stats = stats
+        res.time_model = inst.time_model
+        return res
+
+    k = inst.n_agents
+    for i in range(k):
+        if inst.h[i][inst.starts[i]] >= UNREACHABLE:
+            return finish(CBSResult("infeasible", message=f"agent {i} cannot reach its goal from its start"))
+    cur = list(order) if order is not None else initial_order(inst)
+    if sorted(cur) != list(range(k)):
+        raise ValueError(f"order must be a permutation of the {k} agents")
+    deadline = None if time_limit is None else t0 + time_limit
+    lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
+    failed: Optional[int] = None
+    for attempt in range(restarts + 1):
+        stats.hl_expanded = attempt + 1
+        try:
+            paths, failed = plan_in_order(inst, cur, counter, expansion_limit, deadline, start_hold)
+        except BudgetExceeded:
+            return finish(CBSResult("timeout", lower_bound=lb,
+                                    message=f"expansion limit of {expansion_limit} reached (prioritised planning)"))
+        except TimeoutError:
+            return finish(CBSResult("timeout", lower_bound=lb,
+                                    message=f"time limit of {time_limit:g} s reached (prioritised planning)"))
+        if paths is not None:
+            full = [p for p in paths if p is not None]
+            costs = [p[-1][1] for p in full]
+            soc = sum(costs)
+            status = "optimal" if soc == lb else "suboptimal"
+            msg = ("cost equals the lower bound" if status == "optimal"
+                   else f"prioritised planning ({attempt} restarts); cost not bounded")
+            return finish(CBSResult(status, full, soc, max(costs, default=0), lb, message=msg))
+        assert failed is not None
+        cur.remove(failed)
+        cur.insert(0, failed)
+    return finish(CBSResult("timeout", lower_bound=lb,
+                            message=f"prioritised planning failed {restarts + 1} times (last: agent {failed})"))

@@ -1,0 +1,239 @@
+"""Safe-interval path planning (SIPP) against a table of other agents' timed paths.
+
+Prioritised planning plans agents one after another; each later agent must avoid the timed
+paths of the earlier ones. :class:`IntervalTable` records what those paths occupy, node by
+node, as blocked integer ranges (with the nodes near them under proximity), and
+:func:`sipp` finds one agent's earliest arrival at its goal that avoids them. SIPP searches
+over ``(node, safe interval)`` states instead of ``(node, time)``: a node's safe intervals are
+the maximal ranges in which nothing blocks it, and within one interval arriving earlier is
+never worse (the agent can wait), so one state per interval suffices and the search stays
+the size of the graph however long the horizon.
+
+Occupancy follows :mod:`agents.search.mapf.paths` and :func:`~agents.search.mapf.validate.validate`:
+
+- durative: during step ``[k, k + 1)`` an agent occupies the node it waits at, or both ends of
+  the edge it traverses; a move ``u -> v`` of duration ``d`` leaving at ``t`` needs ``u`` free
+  during ``t .. t + d - 1`` and ``v`` free during ``t .. t + d`` (it is at ``v`` at ``t + d``);
+- unit: an agent occupies its node at each integer time, and two agents may not swap along an
+  edge; a move leaving ``u`` at ``t`` needs ``v`` free at ``t + 1``.
+
+In both an agent parks at its goal forever from its final arrival, so an arrival counts only
+in a safe interval of the goal that never ends.
+"""
+from __future__ import annotations
+
+import heapq
+from bisect import bisect_right
+from typing import Dict, List, Optional, Sequence, Set, Tuple
+
+from .instance import UNREACHABLE, MapfInstance
+
+#: The end of an interval that never ends.
+FOREVER = 1 << 50
+
+#: The safe intervals of a node nothing blocks (shared: compared by identity in the search).
+ALWAYS: List[Tuple[int, int]] = [(0, FOREVER)]
+_ALWAYS_STARTS = [0]
+
+#: A timed path ``[(node, time), ...]`` (the format of :class:`~agents.search.mapf.result.CBSResult`).
+Events = List[Tuple[int, int]]
+
+
+class IntervalTable:
+    """Blocked time ranges per node (other agents and the nodes near them), and safe intervals.
+
+    Every range is tagged with the agent it is kept for, so that a hold on an agent's start can
+    be dropped once the agent is planned (:meth:`release`).
+
+    Args:
+        inst: the instance (graph, time model, proximity).
+    """
+
+    def __init__(self, inst: MapfInstance) -> None:
+        self.inst = inst
+        self.unit = inst.unit
+        n = inst.n_nodes
+        #: per node, blocked inclusive ranges ``(first, last, agent, is_hold)``
+        self._blocked: List[List[Tuple[int, int, int, bool]]] = [[] for _ in range(n)]
+        self._safe: List[Optional[List[Tuple[int, int]]]] = [None] * n
+        self._starts: List[Optional[List[int]]] = [None] * n
+        #: per agent, the nodes whose reach its path or hold blocks
+        self._touched: Dict[Tuple[int, bool], Set[int]] = {}
+        #: unit time: reserved moves ``(u, v, t)`` (leaving ``u`` at ``t``), for swap checks
+        self.moves: Set[Tuple[int, int, int]] = set()
+        near = inst.near
+        self._reach: List[Tuple[int, ...]] = [
+            tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
+        #: per node, its moves ``(v, duration)`` (waiting left out)
+        self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
+
+    def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
+        self._touched.setdefault((agent, hold), set()).add(node)
+        entry = (first, last, agent, hold)
+        for x in self._reach[node]:
+            self._blocked[x].append(entry)
+            self._safe[x] = None
+
+    def _drop(self, agent: int, hold: bool) -> None:
+        for node in self._touched.pop((agent, hold), ()):
+            for x in self._reach[node]:
+                self._blocked[x] = [e for e in self._blocked[x] if e[2] != agent or e[3] != hold]
+                self._safe[x] = None
+
+    def hold(self, agent: int, node: int, last: int) -> None:
+        """Keep ``node`` (and the nodes near it) free for ``agent`` during ``0 .. last`` until
+        :meth:`release` (an agent not planned yet waits at its start)."""
+        self._block(agent, True, node, 0, last)
+
+    def release(self, agent: int) -> None:
+        """Drop what :meth:`hold` kept for ``agent``."""
+        self._drop(agent, True)
+
+    def holders(self, node: int) -> Set[int]:
+        """The agents not planned yet whose held start blocks ``node``."""
+        return {e[2] for e in self._blocked[node] if e[3]}
+
+    def reserve(self, agent: int, events: Sequence[Tuple[int, int]]) -> None:
+        """Block what ``agent`` following ``events`` (then parked at its last node) occupies."""
+        unit = self.unit
+        for (u, t0), (v, t1) in zip(events, events[1:]):
+            self._block(agent, False, u, t0, t1 - 1)
+            if u != v:
+                if unit:
+                    self.moves.add((u, v, t0))
+                else:
+                    self._block(agent, False, v, t0, t1 - 1)
+        g, t_end = events[-1]
+        self._block(agent, False, g, t_end, FOREVER)
+
+    def safe(self, node: int) -> List[Tuple[int, int]]:
+        """The safe intervals of ``node``: sorted disjoint inclusive ranges ``(first, last)``."""
+        s = self._safe[node]
+        if s is None:
+            if not self._blocked[node]:
+                self._safe[node] = ALWAYS
+                self._starts[node] = _ALWAYS_STARTS
+                return ALWAYS
+            s = []
+            nxt = 0
+            for a, b, _, _ in sorted(self._blocked[node]):
+                if a > nxt:
+                    s.append((nxt, a - 1))
+                if b + 1 > nxt:
+                    nxt = b + 1
+            if nxt <= FOREVER:
+                s.append((nxt, FOREVER))
+            self._safe[node] = s
+            self._starts[node] = [a for a, _ in s]
+        return s
+
+    def interval_starts(self, node: int) -> List[int]:
+        """First times of :meth:`safe`'s intervals (for bisection)."""
+        if self._safe[node] is None:
+            self.safe(node)
+        starts = self._starts[node]
+        assert starts is not None
+        return starts
+
+
+class BudgetExceeded(Exception):
+    """Raised by :func:`sipp` when its expansion budget runs out."""
+
+
+def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int] = None,
+         counter: Optional[List[int]] = None, explored: Optional[Set[int]] = None) -> Optional[Events]:
+    """The earliest timed path of ``agent`` to its goal that avoids ``table`` (``None``: none).
+
+    A* over ``(node, safe interval)`` states with the instance's true-distance heuristic; ties
+    go to the deeper state. ``counter`` (a one-element list) accumulates expansions; once it
+    exceeds ``budget`` the search raises :class:`BudgetExceeded`. ``explored`` (optional)
+    collects the nodes the search expanded (where a search that fails was confined). The path is optimal: it
+    arrives at the goal no later than any other path that avoids the table and parks there.
+    """
+    s, g = inst.starts[agent], inst.goals[agent]
+    h = inst.h[agent]
+    if h[s] >= UNREACHABLE:
+        return None
+    safe = table.safe
+    cache = table._safe
+    starts_of = table.interval_starts
+    unit = table.unit
+    moves = table.moves
+    out = table.out
+    N = inst.n_nodes
+    s_int = safe(s)
+    if not s_int or s_int[0][0] != 0:
+        return None  # the start is blocked at time 0
+    count = counter if counter is not None else [0]
+    push, pop = heapq.heappush, heapq.heappop
+    # a state (node v, its j-th safe interval) is coded j * N + v; best arrival and parent per code
+    best: Dict[int, int] = {s: 0}
+    parent: Dict[int, Tuple[int, int]] = {}
+    heap = [(h[s], 0, s)]
+    while heap:
+        f, neg_t, code = pop(heap)
+        t_u = -neg_t
+        if best[code] < t_u:
+            continue
+        u = code % N
+        b_u = cache[u][code // N][1]  # type: ignore[index]
+        if u == g and b_u == FOREVER:
+            return _events(code, N, best, parent)
+        count[0] += 1
+        if explored is not None:
+            explored.add(u)
+        if budget is not None and count[0] > budget:
+            raise BudgetExceeded
+        for v, d in out[u]:
+            hv = h[v]
+            if hv >= UNREACHABLE:
+                continue
+            t_hi = b_u - d + 1  # leave by then: u stays free while leaving
+            if t_hi < t_u:
+                continue
+            v_int = cache[v]
+            if v_int is None:
+                v_int = safe(v)
+            if v_int is ALWAYS and not unit:  # the common case: nothing ever blocks v
+                arr = t_u + d
+                if arr < best.get(v, FOREVER):
+                    best[v] = arr
+                    parent[v] = (code, t_u)
+                    push(heap, (arr + hv, -arr, v))
+                continue
+            lead = d if unit else 0  # v must be free from t + lead to t + d
+            # first interval of v that could contain t + lead for some t >= t_u
+            j = bisect_right(starts_of(v), t_u + lead) - 1
+            if j < 0:
+                j = 0
+            for jv in range(j, len(v_int)):
+                a_v, b_v = v_int[jv]
+                if a_v - lead > t_hi:
+                    break
+                t = t_u if t_u > a_v - lead else a_v - lead
+                last = t_hi if t_hi < b_v - d else b_v - d
+                if unit:
+                    while t <= last and (v, u, t) in moves:
+                        t += 1
+                if t > last:
+                    continue
+                arr = t + d
+                key = jv * N + v
+                if arr < best.get(key, FOREVER):
+                    best[key] = arr
+                    parent[key] = (code, t)
+                    push(heap, (arr + hv, -arr, key))
+    return None
+
+
+def _events(code: int, N: int, best: Dict[int, int], parent: Dict[int, Tuple[int, int]]) -> Events:
+    """Rebuild ``[(node, time), ...]``: each arrival, and the departure after a wait."""
+    out: Events = [(code % N, best[code])]
+    while code in parent:
+        prev, t_dep = parent[code]
+        if t_dep > best[prev]:
+            out.append((prev % N, t_dep))
+        out.append((prev % N, best[prev]))
+        code = prev
+    out.reverse()
+    return out

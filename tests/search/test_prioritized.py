@@ -1,0 +1,195 @@
+"""Safe-interval path planning and prioritised planning, against brute force on small graphs."""
+import numpy as np
+import pytest
+from cbs_bruteforce import brute_force_soc, random_grid
+from test_cbs_bruteforce import adjacency, pick, random_graph
+
+from agents.search.mapf import MapfInstance, Proximity, validate
+from agents.search.mapf.prioritized import initial_order, plan_in_order, solve_prioritized
+from agents.search.mapf.sipp import FOREVER, IntervalTable, sipp
+
+
+def random_proximity(rng, n, p_near=0.15):
+    """A random symmetric 'near' relation as a distance matrix with radius 1."""
+    d = np.full((n, n), 5.0)
+    near = rng.random((n, n)) < p_near
+    near = near | near.T
+    d[near] = 0.5
+    np.fill_diagonal(d, 0.0)
+    return Proximity(d, 1.0), near
+
+
+def blocked_steps(inst, paths, horizon):
+    """Per step ``0..horizon``, the nodes another agent occupies or is near (an independent
+    rendering of the occupancy rules), and the reserved unit-time moves."""
+    near = inst.near_mat
+    occ = [set() for _ in range(horizon + 1)]
+    moves = set()
+    for events in paths:
+        timeline = []
+        for (u, t0), (v, t1) in zip(events, events[1:]):
+            here = {u} if (inst.unit or u == v) else {u, v}
+            timeline.extend([here] * (t1 - t0))
+            if inst.unit and u != v:
+                moves.add((u, v, t0))
+        while len(timeline) <= horizon:
+            timeline.append({events[-1][0]})
+        for t in range(horizon + 1):
+            for x in timeline[t]:
+                occ[t].add(x)
+                if near is not None:
+                    occ[t].update(np.flatnonzero(near[x]).tolist())
+    return occ, moves
+
+
+def brute_force_arrival(inst, agent, paths, horizon=60):
+    """Earliest arrival of ``agent`` at its goal avoiding ``paths`` (then parked for good), by
+    breadth-first search over ``(node, time)`` up to ``horizon``; ``None`` if none."""
+    occ, moves = blocked_steps(inst, paths, horizon)
+    last_blocked = {}
+    for t in range(horizon + 1):
+        for x in occ[t]:
+            last_blocked[x] = t
+    g = inst.goals[agent]
+    s = inst.starts[agent]
+    if s in occ[0]:
+        return None
+    reach = [set() for _ in range(horizon + 1)]
+    reach[0].add(s)
+    for t in range(horizon):
+        for u in reach[t]:
+            if u == g and last_blocked.get(g, -1) < t:
+                return t
+            for v, d in inst.succ_d[u]:
+                d = 1 if (inst.unit or u == v) else d
+                if t + d > horizon:
+                    continue
+                if inst.unit:
+                    if v in occ[t + 1] or (v, u, t) in moves:
+                        continue
+                elif any(u in occ[k] or v in occ[k] for k in range(t, t + d)) or v in occ[t + d]:
+                    continue
+                reach[t + d].add(v)
+    return None
+
+
+@pytest.mark.parametrize("seed", range(30))
+@pytest.mark.parametrize("time_model", ["unit", "durative"])
+def test_sipp_is_earliest_arrival_against_brute_force(seed, time_model):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 11))
+    edges = random_graph(rng, n, 0.2, max_dur=1 if time_model == "unit" else 3)
+    prox, _ = random_proximity(rng, n, 0.1) if seed % 2 else (None, None)
+    k = int(rng.integers(2, 5))
+    starts, goals = pick(rng, n, k, crossing=seed % 3 == 0)
+    inst = MapfInstance(adjacency(n, edges), starts, goals, time_model=time_model, proximity=prox)
+    table = IntervalTable(inst)
+    done = []
+    for i in range(k - 1):
+        p = sipp(inst, i, table)
+        if p is None:
+            return  # an earlier agent is stuck: nothing to compare for the last one
+        table.reserve(i, p)
+        done.append(p)
+    expected = brute_force_arrival(inst, k - 1, done)
+    got = sipp(inst, k - 1, table)
+    if expected is None:
+        assert got is None or got[-1][1] > 60
+        return
+    assert got is not None, (edges, starts, goals, done)
+    assert got[-1][1] == expected
+    assert validate(inst, None, None, done + [got]) == []
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_prioritized_plans_are_valid_and_not_below_optimal(seed):
+    rng = np.random.default_rng(100 + seed)
+    time_model = "unit" if seed % 2 else "durative"
+    n = int(rng.integers(5, 9))
+    edges = random_graph(rng, n, 0.25, max_dur=1 if time_model == "unit" else 2)
+    prox, near = random_proximity(rng, n, 0.08) if seed % 4 == 1 else (None, None)
+    starts, goals = pick(rng, n, int(rng.integers(2, 4)), crossing=seed % 3 == 0)
+    inst = MapfInstance(adjacency(n, edges), starts, goals, time_model=time_model, proximity=prox)
+    res = solve_prioritized(inst, start_hold=int(rng.integers(0, 4)))
+    optimum = brute_force_soc(n, edges, starts, goals, unit=time_model == "unit",
+                              near=None if near is None else near.tolist())
+    if res.solved:
+        assert validate(inst, None, None, res.paths) == []
+        assert optimum is not None and res.soc >= optimum
+        assert res.soc == sum(p[-1][1] for p in res.paths)
+        assert res.lower_bound <= optimum
+    else:
+        assert res.status in ("timeout", "infeasible")
+        if res.status == "infeasible":
+            assert optimum is None
+
+
+def test_interval_table_holds_and_releases():
+    inst = MapfInstance([[1], [0, 2], [1]], [0, 2], [2, 0], time_model="unit")
+    table = IntervalTable(inst)
+    table.hold(1, 2, 5)
+    assert table.safe(2) == [(6, FOREVER)] and table.holders(2) == {1} and table.holders(0) == set()
+    table.reserve(0, [(0, 0), (1, 1), (1, 8), (2, 9)])
+    assert table.safe(1) == [(0, 0), (9, FOREVER)]
+    assert table.safe(2) == [(6, 8)]  # held to 5, then agent 0 parks there from 9
+    table.release(1)
+    assert table.safe(2) == [(0, 8)]
+
+
+def test_prioritized_many_agents_on_a_grid_is_valid():
+    rng = np.random.default_rng(3)
+    n, edges, _ = random_grid(rng, 12, 12, 0.1)
+    starts, goals = pick(rng, n, 30)
+    inst = MapfInstance(adjacency(n, edges), starts, goals, time_model="unit")
+    res = solve_prioritized(inst)
+    assert res.solved, res.message
+    assert validate(inst, None, None, res.paths) == []
+
+
+def test_prioritized_reports_unreachable_goal_and_bad_options():
+    inst = MapfInstance([[1], [0], []], [0, 2], [1, 0], time_model="unit")
+    res = solve_prioritized(inst)
+    assert res.status == "infeasible" and "agent 1" in res.message
+    with pytest.raises(ValueError, match="restarts"):
+        solve_prioritized(inst, restarts=-1)
+    with pytest.raises(ValueError, match="expansion_limit"):
+        solve_prioritized(inst, expansion_limit=0)
+    with pytest.raises(ValueError, match="order"):
+        solve_prioritized(MapfInstance([[1], [0]], [0], [1]), order=[1])
+
+
+def test_prioritized_expansion_budget_is_reported_as_timeout():
+    rng = np.random.default_rng(5)
+    n, edges, _ = random_grid(rng, 10, 10, 0.0)
+    starts, goals = pick(rng, n, 10)
+    inst = MapfInstance(adjacency(n, edges), starts, goals, time_model="unit")
+    res = solve_prioritized(inst, expansion_limit=20)
+    assert res.status == "timeout" and "expansion limit of 20" in res.message
+    assert res.stats.ll_expanded == 21
+
+
+def test_initial_order_puts_an_agent_after_the_one_waiting_at_its_goal():
+    # a path 0-1-2-3: agent 0 (farther) ends at 2, where agent 1 starts: agent 1 goes first
+    inst = MapfInstance([[1], [0, 2], [1, 3], [2]], [0, 2], [2, 3], time_model="unit")
+    assert initial_order(inst) == [1, 0]
+    # on a cycle of such precedences the far-first order stays
+    cyc = MapfInstance([[1], [0, 2], [1, 3], [2]], [0, 3], [3, 0], time_model="unit")
+    assert initial_order(cyc) == [0, 1]
+
+
+def test_an_agent_shut_in_by_a_waiting_agent_goes_after_it():
+    # path 0-1-2-3 with a pocket 4 off node 2; agent 0 (0 -> 3) is planned first but agent 1
+    # waits at 1 in its way until it is planned: agent 1 (1 -> 4) is planned first instead
+    adj = [[1], [0, 2], [1, 3, 4], [2], [2]]
+    inst = MapfInstance(adj, [0, 1], [3, 4], time_model="unit")
+    paths, failed = plan_in_order(inst, [0, 1], [0])
+    assert failed is None
+    assert validate(inst, None, None, paths) == []
+
+
+def test_initial_order_and_plan_in_order_report_the_failed_agent():
+    # a corridor 0-1-2 where agent 1 waits at its goal 1 in the middle: agent 0 cannot pass
+    inst = MapfInstance([[1], [0, 2], [1]], [0, 1], [2, 1], time_model="unit")
+    assert initial_order(inst) == [0, 1]
+    paths, failed = plan_in_order(inst, [1, 0], [0])
+    assert paths is None and failed == 0
