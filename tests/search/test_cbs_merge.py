@@ -105,11 +105,13 @@ def test_jointly_infeasible_tiny_instances_are_reported_infeasible(name):
     for a in range(3):  # every pair alone has a solution: the pair check cannot tell
         for b in range(a + 1, 3):
             assert brute_force_soc(n, edges, [starts[a], starts[b]], [goals[a], goals[b]]) is not None
-    for kw in ({}, {"merge_threshold": 0, "disjoint_target": False}):
+    for kw in ({}, {"joint_check_states": 0}, {"merge_threshold": 0, "disjoint_target": False}):
         t0 = time.perf_counter()
         res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
         assert res.status == "infeasible", (name, kw, res.status, res.message)
-        if not kw:  # merged, the group's search proves it: the message names the agents and why
+        if not kw:  # the exhaustive check before the search decides it at once
+            assert "joint configurations" in res.message, res.message
+        if kw == {"joint_check_states": 0}:  # merged, the group's search proves it: the message says why
             assert "collide" in res.message and "alone" in res.message, res.message
         assert time.perf_counter() - t0 < 3.0
     # without merging (and without the exhaustive check before the search, which decides these
