@@ -44,7 +44,8 @@ class Method:
         budget: optional per-agent bound on the total predicted cost of a route.
         hold: how the agents keep to the plan: in its ``"order"`` at shared places, or on its
             clock (an early agent waits for its planned departure time at ``"all"`` waypoints or
-            only where the plan ``"waits"``); see :class:`~agents.search.policy.SearchPolicy`.
+            only where the plan ``"waits"``); ``None``: the policy's default
+            (:func:`~agents.search.policy.default_hold`).
         fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
             leg once its own policy is stuck there (see
             :class:`~agents.search.controller.WaypointController`).
@@ -56,7 +57,7 @@ class Method:
     search: bool
     c_max: float = math.inf
     budget: Optional[float] = None
-    hold: str = "order"
+    hold: Optional[str] = None
     fallback: Optional[str] = None
 
     def with_options(self, **kwargs) -> "Method":

@@ -66,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--hold", choices=("order", "waits", "all"), default=None,
                    help="how the search methods' agents keep to the plan: 'order' (the plan's order at shared "
                         "places, however late an agent is), 'waits' or 'all' (the plan's clock; see SearchPolicy; "
-                        "default: the methods' own, 'order')")
+                        "default: 'order' for panorama agents, 'waits' for vector agents)")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,

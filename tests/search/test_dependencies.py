@@ -163,3 +163,20 @@ def test_a_slowed_agent_delays_the_other_instead_of_meeting_it(stand_in_models, 
     assert arrived == {"agent_0", "agent_1"} and waits > 0 and steps < 300
     clock_arrived, clock_contacts, clock_waits, _ = crossing_run(agent, nodes, "waits", 0.5)
     assert clock_waits == 0 and contacts < clock_contacts
+
+
+def test_panorama_agents_keep_the_plans_order_and_vector_agents_its_clock(stand_in_models, nodes):
+    from types import SimpleNamespace
+
+    from gymnasium import spaces
+
+    from agents.search.policy import default_hold
+
+    image = spaces.Dict({"observation": spaces.Box(0, 255, (4, 32, 32, 4), np.uint8)})
+    assert default_hold(SimpleNamespace(observation_space=image)) == "order"
+    assert default_hold(stand_in_models["constrained"]) == "waits"
+    agent = stand_in_models["constrained"]
+    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0).hold == "waits"
+    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="order").hold == "order"
+    with pytest.raises(ValueError, match="hold must be"):
+        SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="never")
