@@ -23,9 +23,10 @@ reason                 meaning
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence
+from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
 
@@ -107,11 +108,11 @@ class FailureTracker:
         self.step_length = float(step_length)
         self.touch = float(touch)
         self.window = int(window)
-        #: per step: name -> why it stood (``"yield:<agent>"``, ``"wait:<agent>"``, ``"wait"``: its planned
-        #: departure time) or None
-        self.holds: List[Dict[str, Optional[str]]] = []
-        #: per step: name -> the live agents it touched
-        self.contacts: List[Dict[str, List[str]]] = []
+        #: per step of the last ``window``: name -> why it stood (``"yield:<agent>"``, ``"wait:<agent>"``,
+        #: ``"wait"``: its planned departure time) or None
+        self.holds: Deque[Dict[str, Optional[str]]] = deque(maxlen=self.window)
+        #: per step of the last ``window``: name -> the live agents it touched
+        self.contacts: Deque[Dict[str, List[str]]] = deque(maxlen=self.window)
 
     def step(self, holding: Dict[str, Optional[str]], infos: Dict[str, Dict[str, Any]], live: Sequence[str]) -> None:
         """Record one step: why each agent held (the controller's ``stats.holding``) and whom it touched."""
@@ -156,8 +157,8 @@ class FailureTracker:
             to_goal = geodesic(end, goals[i])
             progress = geodesic(before, goals[i]) - to_goal
             progress = 0.0 if not math.isfinite(progress) else progress
-            held = [h.get(a) for h in self.holds[-w:]]
-            touched = [c.get(a, []) for c in self.contacts[-w:]]
+            held = [h.get(a) for h in list(self.holds)[-w:]]
+            touched = [c.get(a, []) for c in list(self.contacts)[-w:]]
             stood = [h is not None or bool(t) for h, t in zip(held, touched)]
             held_share = float(np.mean(stood)) if stood else 0.0
             blockers = [h for h in held if h is not None] + [b for t in touched for b in t]

@@ -253,7 +253,7 @@ def evaluate(
     The rows are those of the serial evaluation, in the same order (timing fields aside).
 
     ``memories`` gives search methods (by name) the edge memory their graph learned before
-    (:func:`learn_edge_memory`); each run starts from a copy of it, frozen, so that no run learns
+    (:func:`learn_edge_memory`); every run plans with a frozen copy of it, so that no run learns
     from the test problems and the rows do not depend on the order of the runs.
     """
     import safe_mapf_envs
@@ -267,7 +267,7 @@ def evaluate(
     for k, d in cells:
         problems = make_problems(setup, d, k, n_problems, seed=seed)
         tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
-    frozen = {name: _frozen_copy(m) for name, m in (memories or {}).items()}
+    frozen = {name: m.frozen_copy() for name, m in (memories or {}).items()}
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -288,7 +288,7 @@ def evaluate(
                     env.close()
                 env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=prob.n_agents, max_cycles=max_cycles)
                 cell = (prob.n_agents, prob.difficulty)
-            row, ex = run_row(setup, env, m, prob, seed, memory=_frozen_copy(frozen.get(m.name)))
+            row, ex = run_row(setup, env, m, prob, seed, memory=frozen.get(m.name))
             done(row, prob, ex)
             if bar is not None:
                 bar.update(1)
@@ -310,16 +310,6 @@ def evaluate(
     if bar is not None:
         bar.close()
     return rows
-
-
-def _frozen_copy(memory: Optional[EdgeMemory]) -> Optional[EdgeMemory]:
-    """A frozen copy of ``memory`` (``None`` stays ``None``): a run may not change what others start from."""
-    if memory is None:
-        return None
-    out = EdgeMemory(memory.n_nodes, memory.limit)
-    out.update(memory)
-    out.frozen = True
-    return out
 
 
 def learn_edge_memory(

@@ -614,10 +614,10 @@ class SearchPolicy:
     def _record_progress(self) -> None:
         """Record the buffer edges agents got through since the last step in :attr:`memory`."""
         assert self.controller is not None
+        n = len(self.planner.observations) if self.planner is not None else 0
         for a, seen in self._seen_index.items():
             now = self.controller.index.get(a, seen)
             route = self.routes.get(a, [])
-            n = len(self.planner.observations) if self.planner is not None else 0
             for q in range(max(seen, 1), min(now, len(route))):  # targets seen .. now - 1 were reached
                 u, v = route[q - 1], route[q]
                 if u < n and v < n and u != v:
@@ -661,25 +661,27 @@ class SearchPolicy:
             near = np.minimum(p.D[f], p.D[:, f]) < self.ban_radius
             self._failed[agent].append(f)
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
-        goal = self._goals[agent][None]
         edges = self._exclude_edges(agent)
         parked = self._parked_nodes(agent)
-        sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent] + parked, exclude_edges=edges)
-        if not sub.solved and self._failed[agent]:
-            # banning the neighbourhood cut every route (e.g. the only doorway): ban only the
-            # waypoints that were failed, so the agent tries the passage by other nodes
-            self._banned[agent] = list(self._failed[agent])
-            sub = p.plan(ob[None], goal, budget=self.budget, exclude=self._banned[agent] + parked, exclude_edges=edges)
-        if not sub.solved and self._banned[agent]:
-            # localise: a new route from where it stands, over any node, less the failed edges
-            self._banned[agent] = []
-            sub = p.plan(ob[None], goal, budget=self.budget, exclude=parked, exclude_edges=edges)
-        if not sub.solved and len(edges):
-            # the failed edges were the only way on: try them again from here (the agent was not
-            # where its route said when it failed, or another agent was in the way)
-            sub = p.plan(ob[None], goal, budget=self.budget, exclude_edges=self.memory.removed())
-            if not sub.solved:
-                sub = p.plan(ob[None], goal, budget=self.budget)
+        # (nodes banned from now on, nodes left out of this plan, edges left out), tried in turn: around
+        # the failed waypoints and their neighbourhoods; around the failed waypoints only (the
+        # neighbourhood held the only doorway); localised, from where it stands over any node; and at
+        # last over the edges it failed on too (it was not where its route said when it failed, or
+        # another agent was in the way)
+        attempts = [(self._banned[agent], self._banned[agent] + parked, edges),
+                    (list(self._failed[agent]), self._failed[agent] + parked, edges),
+                    ([], parked, edges), ([], [], self.memory.removed()), ([], [], None)]
+        tried = []
+        for banned, exclude, exclude_edges in attempts:
+            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist())
+            if key in tried:
+                continue
+            tried.append(key)
+            sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
+                         exclude_edges=exclude_edges)
+            if sub.solved:
+                self._banned[agent] = banned
+                break
         if sub.solved:
             new = sub.agent_plans([agent], hold="waits")[agent]
             self.routes[agent] = list(sub.nodes[0])

@@ -14,7 +14,7 @@ only, never from the test problems (:attr:`EdgeMemory.frozen` stops it learning)
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Dict, Iterable, Optional, Tuple, Union
+from typing import Any, Dict, Tuple, Union
 
 import numpy as np
 
@@ -76,6 +76,13 @@ class EdgeMemory:
             for e, c in theirs.items():
                 mine[e] = mine.get(e, 0) + c
 
+    def frozen_copy(self) -> "EdgeMemory":
+        """A copy that keeps what this memory learned and learns nothing more (e.g. for test problems)."""
+        out = EdgeMemory(self.n_nodes, self.limit)
+        out.update(self)
+        out.frozen = True
+        return out
+
     def __len__(self) -> int:
         return len(self.removed())
 
@@ -120,16 +127,6 @@ class EdgeMemory:
         """Read a memory written by :meth:`save`."""
         with np.load(path) as f:
             return cls.from_arrays(f)
-
-    @classmethod
-    def merged(cls, memories: Iterable["EdgeMemory"], n_nodes: Optional[int] = None, limit: int = 1) -> "EdgeMemory":
-        """One memory holding the counts of several."""
-        memories = list(memories)
-        out = cls(n_nodes if n_nodes is not None else memories[0].n_nodes,
-                  memories[0].limit if memories else limit)
-        for m in memories:
-            out.update(m)
-        return out
 
 
 __all__ = ["Edge", "EdgeMemory"]
