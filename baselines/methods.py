@@ -24,8 +24,9 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
+from agents.search.models import distance_fn, policy_fn
 from agents.search.planner import BufferPlanner
-from agents.search.policy import SearchPolicy, distance_fn, policy_fn
+from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
 
 from .anatomy import AgentFailure, FailureTracker

@@ -21,8 +21,9 @@ from .cbs import CBSResult, CBSSolver, solve_cbs
 from .controller import AgentPlan, WaypointController
 from .graph import ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf_instance import MapfInstance, Proximity, integer_durations
+from .models import distance_fn, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
-from .policy import SearchPolicy, distance_fn, policy_fn
+from .policy import SearchPolicy
 from .single import Plan, risk_bounded_path, shortest_path
 from .validate import validate
 

@@ -170,7 +170,7 @@ def test_panorama_agents_keep_the_plans_order_and_vector_agents_its_clock(stand_
 
     from gymnasium import spaces
 
-    from agents.search.policy import default_hold
+    from agents.search.models import default_hold
 
     image = spaces.Dict({"observation": spaces.Box(0, 255, (4, 32, 32, 4), np.uint8)})
     assert default_hold(SimpleNamespace(observation_space=image)) == "order"

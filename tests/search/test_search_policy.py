@@ -191,7 +191,7 @@ def test_the_reach_threshold_default_follows_the_observation_type(agent):
 
     from gymnasium import spaces
 
-    from agents.search.policy import PANORAMA_REACH_THRESHOLD, REACH_THRESHOLD, default_reach_threshold
+    from agents.search.models import PANORAMA_REACH_THRESHOLD, REACH_THRESHOLD, default_reach_threshold
 
     image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
     vector = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
@@ -208,7 +208,7 @@ def test_controller_defaults_follow_the_observation_type(agent):
 
     from gymnasium import spaces
 
-    from agents.search.policy import PANORAMA_CONTROLLER_OPTIONS, default_controller_options
+    from agents.search.models import PANORAMA_CONTROLLER_OPTIONS, default_controller_options
 
     image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
     pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))

@@ -1,0 +1,140 @@
+"""Adapters from trained models to the search: policy and distance functions, graph nodes, defaults.
+
+The functions here turn a goal-conditioned SB3 model into what the planner and the controller
+call (``policy(obs, goals)``, ``distance(obs, goals)``), draw graph nodes from a replay buffer or
+an env, check that a critic and a driver belong together, and pick the controller defaults that
+suit the model's observations (vectors or panoramas). This module does not import torch.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, Dict, Mapping
+
+import numpy as np
+
+#: ``policy(obs[B, ...], goal[B, ...]) -> actions[B, 2]``
+PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+#: ``distance(obs[B, ...], goal[B, ...]) -> [B]``
+DistanceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def policy_fn(model: Any, deterministic: bool = True) -> PolicyFn:
+    """``policy(obs[B], goal[B]) -> actions[B, 2]`` from a goal-conditioned SB3 model."""
+
+    def act(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        batch = {"observation": obs, "achieved_goal": obs, "desired_goal": goals}
+        return model.predict(batch, deterministic=deterministic)[0]
+
+    return act
+
+
+def distance_fn(model: Any, aggregate: str = "max") -> DistanceFn:
+    """``distance(obs[B], goal[B]) -> [B]`` predicted steps (pessimistic ensemble by default)."""
+
+    def dist(obs: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return model.distance(obs, goals, aggregate=aggregate)
+
+    return dist
+
+
+def buffer_observations(replay_buffer: Any, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` distinct observations drawn from an SB3 (dict) replay buffer's stored transitions."""
+    stored = replay_buffer.observations
+    obs = stored["observation"] if isinstance(stored, Mapping) else stored
+    size = replay_buffer.buffer_size if getattr(replay_buffer, "full", False) else replay_buffer.pos
+    flat = np.asarray(obs[:size]).reshape(-1, *np.shape(obs)[2:])
+    if len(flat) < n:
+        raise ValueError(f"the replay buffer holds {len(flat)} observations, fewer than the {n} graph nodes asked for")
+    return flat[np.sort(rng.choice(len(flat), size=n, replace=False))]
+
+
+def env_observations(env_id: str, n: int, seed: int = 0) -> np.ndarray:
+    """Observations at ``n`` random free states of the registered env ``env_id`` (seeded)."""
+    import gymnasium as gym
+
+    import safe_mapf_envs  # noqa: F401  (registers the ids)
+
+    env = gym.make(env_id)
+    try:
+        u: Any = env.unwrapped
+        states = u.sample_states(n, np.random.default_rng(seed))
+        return np.asarray(u.observations_at(states))
+    finally:
+        env.close()
+
+
+#: default waypoint reach threshold (predicted steps) of critics of vector observations
+REACH_THRESHOLD = 2.0
+#: the same for critics of panoramas: their predicted distance to a goal already within the
+#: env's goal radius is below 2 in only 66-94% of cases (median 1.3-1.8, 95th percentile 2.2-3.7,
+#: measured on the shipped apartment agents), and an agent whose waypoint is never judged
+#: reached hovers next to it until the unstick rule frees it
+PANORAMA_REACH_THRESHOLD = 3.0
+
+
+def check_models(critic: Any, driver: Any) -> None:
+    """``ValueError`` unless ``critic`` can annotate a graph and ``driver`` is a model of the same env.
+
+    The critic needs ``pairwise`` distances and costs (a :class:`~agents.SafeGoalTD3`). Models
+    that name their env (``env_id``) must name the same one, and models with an observation
+    space must have the same.
+    """
+    if not callable(getattr(critic, "pairwise", None)):
+        raise ValueError(f"the critic must give pairwise distances and costs (a SafeGoalTD3 model); a "
+                         f"{type(critic).__name__} has no pairwise(): it can only drive, as driver= next to a "
+                         "SafeGoalTD3 critic (with distance_model=the critic to judge waypoints reached)")
+    if driver is None:
+        return
+    ids = [getattr(m, "env_id", None) for m in (critic, driver)]
+    if None not in ids and ids[0] != ids[1]:
+        raise ValueError(f"the critic was trained on {ids[0]} and the driver on {ids[1]}: both must be of one env")
+    spaces_ = [getattr(m, "observation_space", None) for m in (critic, driver)]
+    if None not in spaces_ and spaces_[0] != spaces_[1]:
+        raise ValueError(f"the critic and the driver observe different spaces ({spaces_[0]} and {spaces_[1]}): "
+                         "both must be models of one env")
+
+
+def _reads_images(model: Any) -> bool:
+    """Whether ``model`` observes images (its observation space, or that space's ``observation`` entry)."""
+    from gymnasium import spaces
+
+    from ..policies import is_image_space
+
+    space = getattr(model, "observation_space", None)
+    if isinstance(space, spaces.Dict) and "observation" in space.spaces:
+        space = space["observation"]
+    return space is not None and is_image_space(space)
+
+
+def default_reach_threshold(model: Any) -> float:
+    """:data:`PANORAMA_REACH_THRESHOLD` for a model of image observations, else :data:`REACH_THRESHOLD`."""
+    return PANORAMA_REACH_THRESHOLD if _reads_images(model) else REACH_THRESHOLD
+
+
+#: controller options for agents of panoramas (see :class:`WaypointController`): a waypoint also
+#: counts as reached below its own predicted distance to itself plus half a step, or once the
+#: agent has hovered within 1.5 steps of the threshold for 6 steps without coming closer. On
+#: Apartment0 (5 agents, easy problems, 20 problems) ours' mean cost fell from 21.5 to 14.7. An
+#: agent that comes no closer to its target for 20 steps counts as stuck (it took the target's
+#: panorama for another place's and hovers there).
+PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6, "progress_patience": 20}
+
+
+def default_hold(model: Any) -> str:
+    """``"order"`` for a model of image observations, else ``"waits"`` (see :class:`SearchPolicy`'s ``hold``).
+
+    Panorama agents are often much slower than planned (escapes, fallbacks, replans): in the
+    plan's order a late agent delays the others instead of meeting them. Vector agents keep to
+    the plan's times, and waiting for the plan's order only adds cost there (CentralObstacle,
+    hard problems, 20 agents, 50 problems: ours' mean largest cost 47.4 in the plan's order
+    against 27.4 on the clock, both always successful).
+    """
+    return "order" if _reads_images(model) else "waits"
+
+
+def default_controller_options(model: Any) -> Dict[str, Any]:
+    """:data:`PANORAMA_CONTROLLER_OPTIONS` for a model of image observations, else none (the
+    controller's defaults: the plain reach threshold)."""
+    return dict(PANORAMA_CONTROLLER_OPTIONS) if _reads_images(model) else {}
+__all__ = ["DistanceFn", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_REACH_THRESHOLD", "PolicyFn", "REACH_THRESHOLD",
+           "buffer_observations", "check_models", "default_controller_options", "default_hold",
+           "default_reach_threshold", "distance_fn", "env_observations", "policy_fn"]
