@@ -128,6 +128,11 @@ class SelfSampler(ProblemSampler):
             predicted distance, favouring pairs the critics disagree on (0 disables it).
         aggregate: how the ensemble's distances combine before scoring (``"mean"``, ``"max"``...).
         seed: seed of the sampler's generator (default: the model's seed).
+        narrow_fraction: expected share of the candidate starts, and of the candidate goals,
+            drawn in narrow passages by the bridge test (the env's ``sample_narrow_states``)
+            instead of uniformly: doorways and corridors a little wider than an agent cover
+            little of a map, so uniformly drawn problems seldom teach an agent to enter them
+            (0: the paper's uniform candidates).
     """
 
     name = "self"
@@ -142,7 +147,10 @@ class SelfSampler(ProblemSampler):
         disagreement_weight: float = 0.0,
         aggregate: str = "mean",
         seed: Optional[int] = None,
+        narrow_fraction: float = 0.0,
     ) -> None:
+        if not 0.0 <= narrow_fraction <= 1.0:
+            raise ValueError(f"narrow_fraction must be in [0, 1], got {narrow_fraction!r}")
         if int(n_candidates) < 1 or int(n_keep) < 1 or int(n_keep) > int(n_candidates):
             raise ValueError(f"need 1 <= n_keep <= n_candidates, got n_keep={n_keep}, n_candidates={n_candidates}")
         if not 0.0 <= cost_fraction <= 1.0:
@@ -155,6 +163,7 @@ class SelfSampler(ProblemSampler):
         self.target_cost = None if target_cost is None else _check_band(target_cost, "target_cost")
         self.cost_fraction = float(cost_fraction)
         self.disagreement_weight = float(disagreement_weight)
+        self.narrow_fraction = float(narrow_fraction)
         self.aggregate = aggregate
         self.rng = np.random.default_rng(seed)
         self._seeded = seed is not None
@@ -203,8 +212,8 @@ class SelfSampler(ProblemSampler):
         """Draw ``N`` candidate pairs, keep the best ``K`` as the next training problems."""
         u: Any = env.unwrapped  # the project's env: sample_states
         n = self.n_candidates
-        starts = np.asarray(u.sample_states(n, self.rng))
-        goals = np.asarray(u.sample_states(n, self.rng))
+        starts = self._candidates(u, n)
+        goals = self._candidates(u, n)
         by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
         n_cost = 0 if by_cost is None else int(round(self.cost_fraction * self.n_keep))
         chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
@@ -219,6 +228,15 @@ class SelfSampler(ProblemSampler):
         if self.last_distance is not None and self.last_cost is not None:
             self._stats = {"sampler/pred_distance": float(self.last_distance[keep].mean()),
                            "sampler/pred_cost": float(self.last_cost[keep].mean())}
+
+    def _candidates(self, u: Any, n: int) -> np.ndarray:
+        """``n`` candidate states: uniform, with a ``narrow_fraction`` share (in expectation) in narrow passages."""
+        k = int(self.rng.binomial(n, self.narrow_fraction)) if self.narrow_fraction > 0 else 0
+        states = np.asarray(u.sample_states(n - k, self.rng))
+        if k:
+            states = np.concatenate([states, np.asarray(u.sample_narrow_states(k, self.rng))])
+            states = states[self.rng.permutation(n)]
+        return states
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
         if not self._pool:

@@ -56,6 +56,8 @@ class TrainConfig:
     """self-sampling: problems kept per refill (K)"""
     disagreement_weight: float = 0.0
     """self-sampling: bonus per unit of ensemble disagreement"""
+    narrow_fraction: float = 0.0
+    """self-sampling: share of candidate starts and goals drawn in narrow passages (bridge test)"""
     oracle_band: Tuple[float, float] = (2.0, 15.0)
     """oracle sampler: band of ground-truth geodesic goal distances (world units)"""
     cost_limit: float = 10.0
@@ -150,6 +152,10 @@ class TrainConfig:
             raise ValueError(f"timesteps must be >= 1, got {self.timesteps}")
         if self.threads < 1:
             raise ValueError(f"threads must be >= 1, got {self.threads}")
+        if not 0.0 <= self.narrow_fraction <= 1.0:
+            raise ValueError(f"narrow_fraction must be in [0, 1], got {self.narrow_fraction!r}")
+        if self.narrow_fraction > 0 and self.sampler != "self":
+            raise ValueError("narrow_fraction shapes the self-sampler's candidates: use it with sampler 'self'")
         if self.eval_freq < 1:
             raise ValueError(f"eval_freq must be >= 1, got {self.eval_freq}")
         if self.conv_layers is not None:
@@ -202,7 +208,8 @@ def _sampler_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
         return dict(n_candidates=cfg.n_candidates, n_keep=cfg.n_keep, target_distance=tuple(cfg.target_distance),
                     target_cost=None if cfg.target_cost is None else tuple(cfg.target_cost),
                     cost_fraction=cfg.cost_fraction,
-                    disagreement_weight=cfg.disagreement_weight, seed=cfg.seed)
+                    disagreement_weight=cfg.disagreement_weight, seed=cfg.seed,
+                    narrow_fraction=cfg.narrow_fraction)
     if cfg.sampler == "oracle":
         return dict(band=tuple(cfg.oracle_band))
     if cfg.sampler == "uniform":

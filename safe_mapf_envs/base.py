@@ -125,6 +125,13 @@ class NavigationEnvBase:
         """
         return self.scenario.sample_states(n, rng if rng is not None else self.np_random, max_cost=max_cost)
 
+    def sample_narrow_states(
+        self, n: int, rng: Optional[np.random.Generator] = None, bridge: Optional[float] = None
+    ) -> np.ndarray:
+        """``n`` random free positions in narrow passages (the bridge test, see
+        :meth:`~safe_mapf_envs.scenario.NavigationScenario.sample_narrow_states`), shape ``(n, 2)``."""
+        return self.scenario.sample_narrow_states(n, rng if rng is not None else self.np_random, bridge=bridge)
+
     def geodesic_distance(self, a, b) -> np.ndarray:
         """Ground-truth shortest collision-free path length from world point ``a`` to each of ``b``.
 

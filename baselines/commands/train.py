@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--n-candidates", type=int, default=d.n_candidates, help="self-sampling: N")
     g.add_argument("--n-keep", type=int, default=d.n_keep, help="self-sampling: K")
     g.add_argument("--disagreement-weight", type=float, default=d.disagreement_weight)
+    g.add_argument("--narrow-fraction", type=float, default=d.narrow_fraction,
+                   help="self-sampling: share of candidate starts and goals drawn in narrow passages (doorways, "
+                        "corridors; the bridge test) instead of uniformly")
     g.add_argument("--oracle-band", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.oracle_band),
                    help="oracle sampler: geodesic goal distance band (world units)")
     g = p.add_argument_group("constrained stage")

@@ -134,3 +134,45 @@ def test_the_uniform_training_sampler_keeps_asking_for_goals_anywhere():
     env = gym.make("SafeCentralObstacle-v0")
     assert UniformSampler().reset_options(env) == {"goal_distance": "uniform"}
     assert UniformSampler().reset_options(gym.make("Pendulum-v1")) is None
+
+
+def _clearance(env, points):
+    """Distance to the nearest obstacle or the world's border."""
+    sc = env.unwrapped.scenario
+    p = np.asarray(points, dtype=np.float64)
+    border = np.minimum(p, sc.size_arr - p).min(-1)
+    return np.minimum(sc.field.distance(p), border)
+
+
+def test_narrow_states_lie_in_passages_and_reach_doorways():
+    env = gym.make("SafeFourRooms-v0")
+    u = env.unwrapped
+    rng = np.random.default_rng(0)
+    narrow = u.sample_narrow_states(400, rng)
+    uniform = u.sample_states(400, rng)
+    r = u.scenario.agent_radius
+    assert u.scenario.is_free(narrow).all()
+    # an end of the bridge is blocked, so the centre is at most half a bridge plus a radius from an obstacle
+    assert (_clearance(env, narrow) <= 2.5 * r + r + 1e-9).all()
+    assert np.median(_clearance(env, narrow)) < 0.5 * np.median(_clearance(env, uniform))
+
+
+@pytest.mark.parametrize("bridge", [0.0, -1.0, float("nan")])
+def test_narrow_states_reject_a_bad_bridge(bridge):
+    env = gym.make("SafeFourRooms-v0")
+    with pytest.raises(ValueError, match="bridge"):
+        env.unwrapped.sample_narrow_states(5, np.random.default_rng(0), bridge=bridge)
+
+
+def test_narrow_fraction_draws_candidates_in_passages():
+    env = gym.make("SafeFourRooms-v0")
+    r = env.unwrapped.scenario.agent_radius
+    sampler = SelfSampler(n_candidates=200, n_keep=50, narrow_fraction=1.0, seed=0)
+    pairs = [sampler.reset_options(env) for _ in range(50)]
+    for key in ("start", "goal"):
+        assert (_clearance(env, [p[key] for p in pairs]) <= 3.5 * r + 1e-9).all()
+    none = SelfSampler(n_candidates=200, n_keep=50, narrow_fraction=0.0, seed=0)
+    starts = np.array([none.reset_options(env)["start"] for _ in range(50)])
+    assert (_clearance(env, starts) > 3.5 * r).mean() > 0.5
+    with pytest.raises(ValueError, match="narrow_fraction"):
+        SelfSampler(narrow_fraction=1.5)
