@@ -8,8 +8,10 @@ next to the paper's numbers on the same setting (``SafeCenterDot-v0``):
   goals; the ``per_draw`` (start, goal) pairs whose direct predicted distance (unconstrained
   critic, ensemble mean) is nearest to the target are kept. Targets are the map's largest
   8-connected grid distance (hops on the resized occupancy grid) floor-divided by 8 / 4 / 2
-  (easy / medium / hard: 2, 4 and 8 on CenterDot). A problem of ``K`` agents takes ``K``
-  consecutive pairs;
+  (easy / medium / hard: 2, 4 and 8 on CenterDot); on the apartments, which have no occupancy
+  grid, the diameter is the largest geodesic distance in steps (:func:`step_diameter`; our
+  analogue for the paper's Table II, whose scenes ran in Habitat). A problem of ``K`` agents
+  takes ``K`` consecutive pairs;
 - **graph**: ``n_nodes`` random free states, pessimistic (max) ensemble aggregation,
   ``d_max = 7``. SoRB's graph uses the unconstrained critic's distances; ours uses the
   constrained critic's distances and the unconstrained critic's costs; an edge is kept where
@@ -79,9 +81,20 @@ def grid_diameter(layout: Any) -> int:
     return int(hops[np.isfinite(hops)].max())
 
 
-def paper_targets(layout: Any) -> Dict[str, int]:
-    """Target predicted distances per difficulty: :func:`grid_diameter` floor-divided by 8 / 4 / 2."""
-    d = grid_diameter(layout)
+def step_diameter(env: Any) -> int:
+    """The largest geodesic distance between two free places of ``env``'s map, in steps of an
+    agent at full speed (the ground-truth oracle): the map's size on maps without an occupancy
+    grid (the apartments), where :func:`grid_diameter` does not apply. On CenterDot it reads 19
+    steps against the grid's 17 hops."""
+    u = env.unwrapped
+    return int(u.scenario.oracle.max_distance / float(u.action_scale))
+
+
+def paper_targets(layout: Any, diameter: Optional[int] = None) -> Dict[str, int]:
+    """Target predicted distances per difficulty: the map's diameter floor-divided by 8 / 4 / 2:
+    ``diameter`` where given (e.g. :func:`step_diameter` on the apartments), else
+    :func:`grid_diameter` of the grid map ``layout``."""
+    d = grid_diameter(layout) if diameter is None else int(diameter)
     return {name: int(d // div) for name, div in DIFFICULTIES.items()}
 
 
@@ -111,18 +124,20 @@ class PaperSetup:
         import gymnasium as gym
 
         import safe_mapf_envs  # noqa: F401  (registers the ids)
+        from safe_mapf_envs.maps import MAPS
         from safe_mapf_envs.registration import env_spec
 
+        layout = env_spec(env_id).layout
         env = gym.make(env_id)
         try:
             u: Any = env.unwrapped
             states = u.sample_states(n_nodes, np.random.default_rng(seed))
             obs = np.asarray(u.observations_at(states))
+            targets = paper_targets(layout, None if layout in MAPS else step_diameter(env))
         finally:
             env.close()
         D_unc, C_unc = models["unconstrained"].pairwise(obs, obs, aggregate="max")
         D_con = models["constrained"].pairwise_distance(obs, obs, aggregate="max")
-        targets = paper_targets(env_spec(env_id).layout)
         return cls(env_id, models, states, obs, np.asarray(D_unc, np.float64), np.asarray(C_unc, np.float64),
                    np.asarray(D_con, np.float64), targets=targets, **kwargs)
 
@@ -381,4 +396,5 @@ def choose_best_c_max(rows: Sequence[Dict[str, Any]], method: str = "ours"
 
 
 __all__ = ["PAPER_C_MAX_FACTORS", "PAPER_PROTOCOL_METHODS", "PaperExecution", "PaperSetup", "choose_best_c_max",
-           "evaluate_paper", "execute_paper", "grid_diameter", "make_paper_problems", "paper_targets"]
+           "evaluate_paper", "execute_paper", "grid_diameter", "make_paper_problems", "paper_targets",
+           "step_diameter"]

@@ -377,9 +377,9 @@ def _run_paper(args: argparse.Namespace) -> int:
     from safe_mapf_envs.registration import env_spec
 
     spec = env_spec(args.env)
-    if spec.layout not in MAPS or spec.obs_type != "vector":
-        raise ValueError(f"--protocol paper needs a 2D grid map with vector observations (e.g. SafeCenterDot-v0), "
-                         f"not {args.env}")
+    if spec.layout not in MAPS and not spec.layout.startswith("Apartment"):
+        raise ValueError(f"--protocol paper needs a 2D grid map (e.g. SafeCenterDot-v0) or an apartment "
+                         f"(SafeApartment0-v0 .. SafeApartment3-v0), not {args.env}")
     names = list(dict.fromkeys(args.methods or PAPER_PROTOCOL_METHODS))
     if set(names) - set(PAPER_PROTOCOL_METHODS):
         raise ValueError(f"--protocol paper runs {', '.join(PAPER_PROTOCOL_METHODS)}; not "

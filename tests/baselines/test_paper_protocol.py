@@ -181,8 +181,9 @@ def test_evaluate_paper_runs_ours_once_per_c_max(setup):
 def test_paper_protocol_command_refuses_what_does_not_apply(tmp_path, capsys):
     from baselines.cli import main
 
-    assert main(["evaluate", "--protocol", "paper", "--env", "SafeApartment0-v0", "--out", str(tmp_path)]) == 2
-    assert "needs a 2D grid map" in capsys.readouterr().err
+    assert main(["evaluate", "--protocol", "paper", "--env", "SafeApartment0-v0", "--fallback",
+                 "--out", str(tmp_path)]) == 2
+    assert "--fallback does not apply" in capsys.readouterr().err
     assert main(["evaluate", "--protocol", "paper", "--env", ENV, "--c-max", "0.5", "--out", str(tmp_path)]) == 2
     assert "--c-max does not apply" in capsys.readouterr().err
     assert main(["evaluate", "--protocol", "paper", "--env", ENV, "--methods", "ours_budget",
@@ -224,3 +225,18 @@ def test_centerdot_table_sets_three_numbers_per_cell(setup, tmp_path, capsys, mo
     assert "SoRB + CBS and ours cells" in out and "Strict protocol" in out
     agg = {(a["method"], a["agents"]): a for a in aggregate(kept)}
     assert f"{agg[('ours', 5)]['cost_mean']:.2f}" in easy5
+
+
+def test_apartments_take_their_targets_from_the_geodesic_diameter_in_steps():
+    import gymnasium as gym
+
+    from baselines.paper_protocol import step_diameter
+
+    env = gym.make("SafeCenterDot-v0")  # a grid map: both measures exist and roughly agree
+    d = step_diameter(env)
+    assert grid_diameter("CenterDot") <= d <= np.hypot(*env.unwrapped.scenario.size)
+    apt = gym.make("SafeApartment0-v0")
+    u = apt.unwrapped
+    steps = step_diameter(apt)
+    assert steps == int(u.scenario.oracle.max_distance / u.action_scale) and steps > 40  # a 14 m walk, 0.25 m steps
+    assert paper_targets("Apartment0", steps) == {"easy": steps // 8, "medium": steps // 4, "hard": steps // 2}
