@@ -128,11 +128,15 @@ class SelfSampler(ProblemSampler):
             predicted distance, favouring pairs the critics disagree on (0 disables it).
         aggregate: how the ensemble's distances combine before scoring (``"mean"``, ``"max"``...).
         seed: seed of the sampler's generator (default: the model's seed).
-        narrow_fraction: expected share of the candidate starts, and of the candidate goals,
-            drawn in narrow passages by the bridge test (the env's ``sample_narrow_states``)
-            instead of uniformly: doorways and corridors a little wider than an agent cover
-            little of a map, so uniformly drawn problems seldom teach an agent to enter them
-            (0: the paper's uniform candidates).
+        narrow_fraction: share of the ``K`` kept problems that go through a narrow passage
+            (a doorway, a corridor, a gap between furniture; the env's
+            ``sample_narrow_crossings``), start and goal ``narrow_reach`` steps on either side.
+            They are not scored: a critic that has never been through a passage reads its far
+            side as unreachable, so choosing by predicted distance would never pick them, and
+            uniformly drawn problems seldom cross a passage a little wider than an agent
+            (0: the paper's sampler).
+        narrow_reach: band of distances (in steps of the agent at full speed) of start and goal
+            from the passage.
     """
 
     name = "self"
@@ -148,6 +152,7 @@ class SelfSampler(ProblemSampler):
         aggregate: str = "mean",
         seed: Optional[int] = None,
         narrow_fraction: float = 0.0,
+        narrow_reach: Band = (2.0, 6.0),
     ) -> None:
         if not 0.0 <= narrow_fraction <= 1.0:
             raise ValueError(f"narrow_fraction must be in [0, 1], got {narrow_fraction!r}")
@@ -164,6 +169,7 @@ class SelfSampler(ProblemSampler):
         self.cost_fraction = float(cost_fraction)
         self.disagreement_weight = float(disagreement_weight)
         self.narrow_fraction = float(narrow_fraction)
+        self.narrow_reach = _check_band(narrow_reach, "narrow_reach")
         self.aggregate = aggregate
         self.rng = np.random.default_rng(seed)
         self._seeded = seed is not None
@@ -211,32 +217,32 @@ class SelfSampler(ProblemSampler):
     def refill(self, env: gym.Env) -> None:
         """Draw ``N`` candidate pairs, keep the best ``K`` as the next training problems."""
         u: Any = env.unwrapped  # the project's env: sample_states
-        n = self.n_candidates
-        starts = self._candidates(u, n)
-        goals = self._candidates(u, n)
-        by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
-        n_cost = 0 if by_cost is None else int(round(self.cost_fraction * self.n_keep))
+        n_narrow = int(round(self.narrow_fraction * self.n_keep))
+        n_scored = self.n_keep - n_narrow
+        n = self.n_candidates if n_scored else 0
+        starts = np.asarray(u.sample_states(n, self.rng))
+        goals = np.asarray(u.sample_states(n, self.rng))
+        by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals)) if n else \
+            (np.empty(0), None)
+        n_cost = 0 if by_cost is None else int(round(self.cost_fraction * n_scored))
         chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
         rest = by_distance.copy()
         rest[chosen] = np.inf
-        n_rest = self.n_keep - n_cost
+        n_rest = n_scored - n_cost
         if n_rest:
             chosen = np.concatenate([chosen, np.argpartition(rest, n_rest - 1)[:n_rest]])
-        keep = chosen[self.rng.permutation(len(chosen))]
-        self._pool = [(starts[i], goals[i]) for i in keep]
+        pool = [(starts[i], goals[i]) for i in chosen]
+        if n_narrow:
+            step = float(getattr(u, "action_scale", 1.0))
+            lo, hi = self.narrow_reach
+            a, b = u.sample_narrow_crossings(n_narrow, (lo * step, hi * step), self.rng)
+            pool += list(zip(a, b))
+        keep = self.rng.permutation(len(pool))
+        self._pool = [pool[i] for i in keep]
         self.n_refills += 1
-        if self.last_distance is not None and self.last_cost is not None:
-            self._stats = {"sampler/pred_distance": float(self.last_distance[keep].mean()),
-                           "sampler/pred_cost": float(self.last_cost[keep].mean())}
-
-    def _candidates(self, u: Any, n: int) -> np.ndarray:
-        """``n`` candidate states: uniform, with a ``narrow_fraction`` share (in expectation) in narrow passages."""
-        k = int(self.rng.binomial(n, self.narrow_fraction)) if self.narrow_fraction > 0 else 0
-        states = np.asarray(u.sample_states(n - k, self.rng))
-        if k:
-            states = np.concatenate([states, np.asarray(u.sample_narrow_states(k, self.rng))])
-            states = states[self.rng.permutation(n)]
-        return states
+        if self.last_distance is not None and self.last_cost is not None and len(chosen):
+            self._stats = {"sampler/pred_distance": float(self.last_distance[chosen].mean()),
+                           "sampler/pred_cost": float(self.last_cost[chosen].mean())}
 
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
         if not self._pool:

@@ -132,6 +132,15 @@ class NavigationEnvBase:
         :meth:`~safe_mapf_envs.scenario.NavigationScenario.sample_narrow_states`), shape ``(n, 2)``."""
         return self.scenario.sample_narrow_states(n, rng if rng is not None else self.np_random, bridge=bridge)
 
+    def sample_narrow_crossings(
+        self, n: int, reach: Tuple[float, float], rng: Optional[np.random.Generator] = None,
+        bridge: Optional[float] = None,
+    ) -> Tuple[np.ndarray, np.ndarray]:
+        """``n`` start-goal pairs through narrow passages, ``reach`` (world units) on either side
+        (see :meth:`~safe_mapf_envs.scenario.NavigationScenario.sample_narrow_crossings`)."""
+        return self.scenario.sample_narrow_crossings(n, rng if rng is not None else self.np_random, reach,
+                                                     bridge=bridge)
+
     def geodesic_distance(self, a, b) -> np.ndarray:
         """Ground-truth shortest collision-free path length from world point ``a`` to each of ``b``.
 

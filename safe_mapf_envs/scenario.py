@@ -165,6 +165,24 @@ class NavigationScenario:
             + f" on {self.layout.name}"
         )
 
+    def _bridges(self, n: int, rng: np.random.Generator, bridge: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
+        """``n`` successful bridge tests: their centres ``(n, 2)`` and unit directions ``(n, 2)``."""
+        n = check_count(n, "n", 0)
+        length = 5.0 * self.agent_radius if bridge is None else check_number(bridge, "bridge", strict=True)
+        centres, directions = np.empty((0, 2)), np.empty((0, 2))
+        for _ in range(200):
+            m = max(64 * (n - len(centres)), 256)
+            centre = rng.uniform(0.0, 1.0, size=(m, 2)) * self.size_arr
+            angle = rng.uniform(0.0, np.pi, size=m)
+            unit = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+            half = 0.5 * length * unit
+            ok = self.is_free(centre) & ~self.is_free(centre + half) & ~self.is_free(centre - half)
+            centres, directions = np.concatenate([centres, centre[ok]]), np.concatenate([directions, unit[ok]])
+            if len(centres) >= n:
+                return centres[:n], directions[:n]
+        raise ValueError(f"could not sample {plural(n, 'narrow-passage state')} on {self.layout.name} "
+                         f"with a bridge of {length:g} units: the map has no passage that narrow")
+
     def sample_narrow_states(self, n: int, rng: np.random.Generator, bridge: Optional[float] = None) -> np.ndarray:
         """Sample ``n`` free positions in narrow passages (doorways, corridors, gaps between furniture).
 
@@ -179,20 +197,39 @@ class NavigationScenario:
         Returns an ``(n, 2)`` array in world units; ``ValueError`` when the map has no such
         passage (after many tries).
         """
+        return self._bridges(n, rng, bridge)[0]
+
+    def sample_narrow_crossings(
+        self, n: int, rng: np.random.Generator, reach: Tuple[float, float], bridge: Optional[float] = None
+    ) -> Tuple[np.ndarray, np.ndarray]:
+        """``n`` start-goal pairs that go through a narrow passage: ``(starts, goals)``, each ``(n, 2)``.
+
+        Each pair lies on a line through a bridge-test centre (:meth:`sample_narrow_states`),
+        across the bridge, i.e. along the passage: start and goal at distances drawn from
+        ``reach = (lo, hi)`` (world units) on either side, in random order, with the straight
+        segment between them free. A critic that has never been through a passage reads such
+        goals as unreachable, so a sampler that chooses problems by predicted distance never
+        picks them; these pairs are drawn without asking it.
+        """
         n = check_count(n, "n", 0)
-        length = 5.0 * self.agent_radius if bridge is None else check_number(bridge, "bridge", strict=True)
-        out = np.empty((0, 2))
+        lo, hi = check_band(reach)
+        starts, goals = np.empty((0, 2)), np.empty((0, 2))
         for _ in range(200):
-            m = max(64 * (n - len(out)), 256)
-            centre = rng.uniform(0.0, 1.0, size=(m, 2)) * self.size_arr
-            angle = rng.uniform(0.0, np.pi, size=m)
-            half = 0.5 * length * np.stack([np.cos(angle), np.sin(angle)], axis=1)
-            ok = self.is_free(centre) & ~self.is_free(centre + half) & ~self.is_free(centre - half)
-            out = np.concatenate([out, centre[ok]])
-            if len(out) >= n:
-                return out[:n]
-        raise ValueError(f"could not sample {plural(n, 'narrow-passage state')} on {self.layout.name} "
-                         f"with a bridge of {length:g} units: the map has no passage that narrow")
+            m = max(4 * (n - len(starts)), 16)
+            centre, unit = self._bridges(m, rng, bridge)
+            along = np.stack([-unit[:, 1], unit[:, 0]], axis=1)
+            a = centre - rng.uniform(lo, hi, size=(m, 1)) * along
+            b = centre + rng.uniform(lo, hi, size=(m, 1)) * along
+            t = np.linspace(0.0, 1.0, 16)
+            path = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
+            ok = self.is_free(path.reshape(-1, 2)).reshape(m, len(t)).all(axis=1)
+            flip = rng.random(m) < 0.5
+            a, b = np.where(flip[:, None], b, a), np.where(flip[:, None], a, b)
+            starts, goals = np.concatenate([starts, a[ok]]), np.concatenate([goals, b[ok]])
+            if len(starts) >= n:
+                return starts[:n], goals[:n]
+        raise ValueError(f"could not sample {plural(n, 'narrow-passage crossing')} on {self.layout.name} "
+                         f"reaching {lo:g}-{hi:g} units from the passage")
 
     def sample_goal_in_band(self, start: np.ndarray, band: Tuple[float, float], rng: np.random.Generator) -> np.ndarray:
         """Sample a free goal whose ground-truth geodesic distance from ``start`` lies in ``band``."""

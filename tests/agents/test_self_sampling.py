@@ -136,6 +136,20 @@ def test_the_uniform_training_sampler_keeps_asking_for_goals_anywhere():
     assert UniformSampler().reset_options(gym.make("Pendulum-v1")) is None
 
 
+DOOR = ("....#....",
+        "....#....",
+        ".........",
+        "....#....",
+        "....#....")
+
+
+def door_env():
+    """Two small rooms joined by a one-cell door (fast to sample on: few boxes)."""
+    from safe_mapf_envs.maps import GridMap
+
+    return gym.make("SafeFourRooms-v0", layout=GridMap("Door", DOOR, resize_factor=2.0, cost_radius=1.0))
+
+
 def _clearance(env, points):
     """Distance to the nearest obstacle or the world's border."""
     sc = env.unwrapped.scenario
@@ -145,7 +159,7 @@ def _clearance(env, points):
 
 
 def test_narrow_states_lie_in_passages_and_reach_doorways():
-    env = gym.make("SafeFourRooms-v0")
+    env = door_env()
     u = env.unwrapped
     rng = np.random.default_rng(0)
     narrow = u.sample_narrow_states(400, rng)
@@ -159,20 +173,41 @@ def test_narrow_states_lie_in_passages_and_reach_doorways():
 
 @pytest.mark.parametrize("bridge", [0.0, -1.0, float("nan")])
 def test_narrow_states_reject_a_bad_bridge(bridge):
-    env = gym.make("SafeFourRooms-v0")
+    env = door_env()
     with pytest.raises(ValueError, match="bridge"):
         env.unwrapped.sample_narrow_states(5, np.random.default_rng(0), bridge=bridge)
 
 
-def test_narrow_fraction_draws_candidates_in_passages():
-    env = gym.make("SafeFourRooms-v0")
-    r = env.unwrapped.scenario.agent_radius
-    sampler = SelfSampler(n_candidates=200, n_keep=50, narrow_fraction=1.0, seed=0)
-    pairs = [sampler.reset_options(env) for _ in range(50)]
-    for key in ("start", "goal"):
-        assert (_clearance(env, [p[key] for p in pairs]) <= 3.5 * r + 1e-9).all()
-    none = SelfSampler(n_candidates=200, n_keep=50, narrow_fraction=0.0, seed=0)
-    starts = np.array([none.reset_options(env)["start"] for _ in range(50)])
-    assert (_clearance(env, starts) > 3.5 * r).mean() > 0.5
+def test_narrow_crossings_go_through_a_passage_along_a_free_segment():
+    env = door_env()
+    sc = env.unwrapped.scenario
+    starts, goals = env.unwrapped.sample_narrow_crossings(60, (2.0, 5.0), np.random.default_rng(1))
+    t = np.linspace(0.0, 1.0, 41)[None, :, None]
+    path = starts[:, None, :] + t * (goals - starts)[:, None, :]
+    assert sc.is_free(starts).all() and sc.is_free(goals).all()
+    length = np.linalg.norm(goals - starts, axis=1)
+    # the way through is about the straight segment (free where the sampler checked it)
+    geodesic = np.array([env.unwrapped.geodesic_distance(a, b) for a, b in zip(starts, goals)])
+    assert (geodesic <= 1.1 * length + 0.5).all()
+    assert ((length >= 4.0 - 1e-9) & (length <= 10.0 + 1e-9)).all()
+    # somewhere along the way the passage is narrow, while the ends lie farther from obstacles
+    narrowest = _clearance(env, path.reshape(-1, 2)).reshape(len(starts), -1).min(axis=1)
+    assert (narrowest <= 3.5 * sc.agent_radius + 1e-9).all()
+
+
+def test_narrow_fraction_adds_unscored_passage_crossings():
+    env = door_env()
+    critic = ChebyshevCritic()
+    only = SelfSampler(n_candidates=200, n_keep=20, narrow_fraction=1.0, seed=0)
+    only.bind(critic)
+    pairs = [only.reset_options(env) for _ in range(20)]
+    assert critic.calls == 0  # the crossings are not scored
+    gaps = np.array([np.linalg.norm(p["goal"] - p["start"]) for p in pairs])
+    assert ((gaps >= 4 * env.unwrapped.action_scale - 1e-9) & (gaps <= 12 * env.unwrapped.action_scale + 1e-9)).all()
+    half = SelfSampler(n_candidates=200, n_keep=20, narrow_fraction=0.5, target_distance=1.0, seed=0)
+    half.bind(critic)
+    gaps = np.array([np.linalg.norm(p["goal"] - p["start"]) for p in (half.reset_options(env) for _ in range(20))])
+    assert critic.calls == 1
+    assert np.sum(gaps >= 4 * env.unwrapped.action_scale - 1e-9) >= 10  # the crossings, besides 10 scored short ones
     with pytest.raises(ValueError, match="narrow_fraction"):
         SelfSampler(narrow_fraction=1.5)
