@@ -45,10 +45,13 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import FloatSchedule, polyak_update, safe_mean, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
 
+from .actor import GoalActor
 from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
+from .critics import CategoricalCritic
 from .distributional import categorical_projection, shift_distance_target
+from .heads import aggregate_ensemble
 from .lagrangian import LagrangeMultiplier
-from .policies import CategoricalCritic, GoalActor, SafeGoalPolicy, aggregate_ensemble
+from .policies import SafeGoalPolicy
 from .self_sampling import ProblemResetWrapper, ProblemSampler, find_wrappers, install_sampler, make_sampler
 from .threads import inference_threads, torch_threads
 
