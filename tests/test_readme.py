@@ -44,3 +44,12 @@ def test_a_python_block_runs(page, index, block, monkeypatch, tmp_path):
     torch.set_num_threads(1)
     monkeypatch.chdir(tmp_path)
     exec(compile(block, f"{page} block {index}", "exec"), {"__name__": f"doc_block_{index}"})
+
+
+def test_the_readme_stays_a_front_door():
+    """The README is short (the documentation pages hold the rest) and links into them."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    linked = set(re.findall(r"\]\((docs/[^)#]+\.md)", text))
+    assert {"docs/quickstart.md", "docs/evaluation.md", "docs/benchmarks.md"} <= linked
+    assert all((ROOT / page).is_file() for page in linked), linked
