@@ -31,7 +31,7 @@ _TORCH_PRELOADED = "torch" in sys.modules
 
 _EXPORTS = {
     "SafeGoalTD3": "agents.algorithm",
-    "CheckpointError": "agents.algorithm",
+    "CheckpointError": "agents.checkpoints",
     "SafeGoalPolicy": "agents.policies",
     "GoalCostReplayBuffer": "agents.buffers",
     "LagrangeMultiplier": "agents.lagrangian",

@@ -26,7 +26,6 @@ import inspect
 import io
 import pathlib
 import warnings
-import zipfile
 from collections import deque
 from typing import Any, ClassVar, Dict, List, Optional, Tuple, Type, TypeVar, Union
 
@@ -36,84 +35,28 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, ProgressBarCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import FloatSchedule, polyak_update, safe_mean, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
 
+from .actor import GoalActor
+from .augmentation import RandomShift
 from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
+from .callbacks import progress_bar_callback
+from .checkpoints import CheckpointError, check_checkpoint
+from .critics import CategoricalCritic
 from .distributional import categorical_projection, shift_distance_target
+from .heads import aggregate_ensemble
 from .lagrangian import LagrangeMultiplier
-from .policies import CategoricalCritic, GoalActor, SafeGoalPolicy, aggregate_ensemble
+from .policies import SafeGoalPolicy
 from .self_sampling import ProblemResetWrapper, ProblemSampler, find_wrappers, install_sampler, make_sampler
 from .threads import inference_threads, torch_threads
 
 SelfSafeGoalTD3 = TypeVar("SelfSafeGoalTD3", bound="SafeGoalTD3")
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be loaded: corrupt, truncated, incomplete or for another setup."""
-
-
-class TqdmProgressBar(BaseCallback):
-    """A plain ``tqdm`` progress bar over the environment steps of one ``learn`` call.
-
-    Stable-Baselines3's own bar needs ``rich``; this one only needs ``tqdm``.
-    """
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.pbar: Any = None  # a tqdm bar while training
-
-    def _on_training_start(self) -> None:
-        from tqdm.auto import tqdm
-
-        self.pbar = tqdm(total=self.locals["total_timesteps"] - self.model.num_timesteps, unit="step",
-                         dynamic_ncols=True, mininterval=1.0)
-
-    def _on_step(self) -> bool:
-        self.pbar.update(self.training_env.num_envs)
-        return True
-
-    def _on_training_end(self) -> None:
-        if self.pbar is not None:
-            self.pbar.close()
-
-
-def _rich_available() -> bool:
-    try:
-        import rich  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-class RandomShift:
-    """DrQ's random-shift augmentation for batches of image stacks ``(B, ..., H, W, C)``.
-
-    Each sample is padded by ``pad`` pixels (edge values repeated) and cropped back to ``H x W``
-    at a random offset, the same offset for all of a sample's views.
-    """
-
-    def __init__(self, pad: int = 2, generator: Optional[th.Generator] = None) -> None:
-        self.pad = int(pad)
-        self.generator = generator
-
-    def __call__(self, x: th.Tensor) -> th.Tensor:
-        if self.pad == 0:
-            return x
-        b, h, w = x.shape[0], x.shape[-3], x.shape[-2]
-        p = self.pad
-        rows = (th.arange(h + 2 * p) - p).clamp_(0, h - 1)  # edge padding by index
-        cols = (th.arange(w + 2 * p) - p).clamp_(0, w - 1)
-        padded = x.index_select(-3, rows).index_select(-2, cols)
-        dy = th.randint(0, 2 * p + 1, (b,), generator=self.generator).tolist()
-        dx = th.randint(0, 2 * p + 1, (b,), generator=self.generator).tolist()
-        return th.stack([padded[i, ..., dy[i]:dy[i] + h, dx[i]:dx[i] + w, :] for i in range(b)])
 
 
 class SafeGoalTD3(OffPolicyAlgorithm):
@@ -330,7 +273,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
         if not isinstance(callback, BaseCallback):
             callback = ConvertCallback(callback)
         if progress_bar:
-            bar = ProgressBarCallback() if _rich_available() else TqdmProgressBar()
+            bar = progress_bar_callback()
             callback = CallbackList([callback, bar])
         callback.init_callback(self)
         return callback
@@ -620,33 +563,7 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             raise TypeError(f"{cls.__name__}.load got unknown overrides {unknown}; "
                             f"accepted: {sorted(_load_overrides())}")
         lagrange = {k: overrides.pop(k) for k in _LAGRANGE_OVERRIDES if k in overrides}
-        name = str(path) if not isinstance(path, io.BufferedIOBase) else "<stream>"
-        if isinstance(path, (str, pathlib.Path)):
-            p = pathlib.Path(path)
-            if not p.exists() and not p.with_suffix(".zip").exists():
-                raise FileNotFoundError(f"no checkpoint at {name}")
-        try:
-            data, params, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects)
-        except (zipfile.BadZipFile, EOFError, OSError) as exc:
-            raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip): {exc}") from exc
-        except Exception as exc:  # unpickling or torch deserialisation errors
-            if "zip-file" in str(exc):  # SB3 reports a bad zip as ValueError
-                raise CheckpointError(f"{name} is not a readable checkpoint (truncated or corrupt zip)") from exc
-            raise CheckpointError(f"{name}: could not deserialise the checkpoint "
-                                  f"({type(exc).__name__}: {exc})") from exc
-        if data is None:
-            raise CheckpointError(f"{name} has no 'data' entry (not an SB3 checkpoint, or incomplete)")
-        missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]
-        if missing:
-            raise CheckpointError(f"{name} is missing the keys {missing} in its 'data' entry")
-        policy_class = data["policy_class"]
-        if not (isinstance(policy_class, type) and issubclass(policy_class, SafeGoalPolicy)):
-            raise CheckpointError(f"{name} holds a {getattr(policy_class, '__name__', policy_class)!r} policy, "
-                                  f"not a SafeGoalPolicy: it was not saved by {cls.__name__}")
-        needed = ["policy", "actor.optimizer", "critic.optimizer", "cost_critic.optimizer"]
-        absent = [k for k in needed if not params or k not in params]
-        if absent:
-            raise CheckpointError(f"{name} is missing the parameter files {[k + '.pth' for k in absent]}")
+        name = check_checkpoint(path, device=device, custom_objects=custom_objects, owner=cls.__name__)
         try:
             model = super().load(path, env=env, device=device, custom_objects=custom_objects,
                                  print_system_info=print_system_info, force_reset=force_reset, **overrides)
@@ -678,4 +595,4 @@ def _load_overrides() -> List[str]:
     return [k for k in inspect.signature(SafeGoalTD3.__init__).parameters if k not in fixed]
 
 
-__all__ = ["CheckpointError", "SafeGoalTD3", "TqdmProgressBar"]
+__all__ = ["SafeGoalTD3"]

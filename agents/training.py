@@ -232,7 +232,7 @@ def build_model(cfg: TrainConfig):
     import safe_mapf_envs  # noqa: F401
 
     from .algorithm import SafeGoalTD3
-    from .policies import is_image_space
+    from .encoders import is_image_space
 
     env = gym.make(cfg.env_id)
     obs_space = cast(gym.spaces.Dict, env.observation_space)

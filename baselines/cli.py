@@ -13,9 +13,8 @@ import os
 import sys
 from typing import Sequence
 
+from .distributed import MissingExtraError
 
-class MissingExtraError(ImportError):
-    """An optional dependency a flag needs (e.g. Ray for ``--ray``) is not installed."""
 
 class DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Appends "(default: X)" to an option's help only where it says something: not for flags

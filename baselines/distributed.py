@@ -6,20 +6,30 @@ once; each worker (one Ray actor per CPU) rebuilds the planner from it and loads
 from their saved bytes, then runs single (method, problem) executions. The problems are drawn
 by the driver, every run is seeded as in the serial evaluation, and the rows come back in the
 serial order, so a Ray evaluation gives the serial rows (timing fields aside).
+
+This module is the evaluation's back end and knows nothing of it: :mod:`baselines.evaluation`
+hands it the setup (a dataclass rebuilt on each worker from its fields) and the function that
+runs one (method, problem) pair, so imports go one way, from the evaluation down to here.
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
-from typing import Any, Dict, Iterable, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterable, Optional, Sequence, Tuple
 
 RAY_HINT = 'Ray is not installed: pip install "safe-mapf[ray]" (or pip install ray)'
+
+#: ``run(setup, env, method, problem, seed, memory=...) -> (row, execution)``: one evaluation run
+RunFn = Callable[..., Tuple[Dict[str, Any], Any]]
+
+
+class MissingExtraError(ImportError):
+    """An optional dependency a flag needs (e.g. Ray for ``--ray``) is not installed."""
 
 
 def require_ray() -> Any:
     """The ``ray`` module, or an ``ImportError`` that says how to install it."""
-    from .cli import MissingExtraError
-
     try:
         import ray
     except ImportError:
@@ -60,26 +70,26 @@ def _unpack_model(packed: Tuple[str, Any]) -> Any:
 
 
 def setup_payload(setup: Any) -> Dict[str, Any]:
-    """What a worker needs to rebuild ``setup`` (an :class:`~baselines.evaluation.EvaluationSetup`)."""
-    return dict(env_id=setup.env_id, models={k: _pack_model(m) for k, m in setup.models.items()},
-                states=setup.states, observations=setup.observations, D=setup.D, C=setup.C,
-                options=dict(d_max=setup.d_max, proximity_radius=setup.proximity_radius,
-                             suboptimality=setup.suboptimality, cbs_time_limit=setup.cbs_time_limit,
-                             min_separation=setup.min_separation, max_edges=setup.max_edges))
+    """What a worker needs to rebuild ``setup`` (a dataclass such as
+    :class:`~baselines.evaluation.EvaluationSetup` whose ``models`` field holds SB3 models): its
+    class and its ``__init__`` fields, the models as the bytes of their zips."""
+    fields = {f.name: getattr(setup, f.name) for f in dataclasses.fields(setup) if f.init}
+    fields["models"] = {k: _pack_model(m) for k, m in fields["models"].items()}
+    return dict(cls=type(setup), fields=fields)
 
 
 class EvaluationWorker:
-    """One worker: the setup rebuilt from its payload, and one env per agent count."""
+    """One worker: the setup rebuilt from its payload, the function that runs one task, and one
+    env per agent count."""
 
-    def __init__(self, payload: Dict[str, Any], max_cycles: int, threads: int = 1) -> None:
+    def __init__(self, payload: Dict[str, Any], run: RunFn, max_cycles: int, threads: int = 1) -> None:
         import torch
 
-        from baselines.evaluation import EvaluationSetup
-
         torch.set_num_threads(threads)
-        models = {k: _unpack_model(v) for k, v in payload["models"].items()}
-        self.setup = EvaluationSetup(payload["env_id"], models, payload["states"], payload["observations"],
-                                     payload["D"], payload["C"], **payload["options"])
+        fields = dict(payload["fields"])
+        fields["models"] = {k: _unpack_model(v) for k, v in fields["models"].items()}
+        self.setup = payload["cls"](**fields)
+        self.run_fn = run
         self.max_cycles = max_cycles
         self.envs: Dict[int, Any] = {}
 
@@ -87,27 +97,27 @@ class EvaluationWorker:
         """Run one task ``(index, method, problem, base seed, edge memory or None)``; returns ``(index, row,
         execution)``."""
         import safe_mapf_envs
-        from baselines.evaluation import run_row
 
         index, method, problem, seed, memory = task
         k = problem.n_agents
         if k not in self.envs:
             self.envs[k] = safe_mapf_envs.parallel_env(self.setup.env_id, n_agents=k, max_cycles=self.max_cycles)
-        row, ex = run_row(self.setup, self.envs[k], method, problem, seed, memory=memory)
+        row, ex = self.run_fn(self.setup, self.envs[k], method, problem, seed, memory=memory)
         return index, row, ex
 
 
-def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycles: int,
+def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycles: int, run: RunFn,
                address: Optional[str] = None,
                memories: Optional[Dict[str, Any]] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
-    """Run ``tasks`` (``(method, problem)`` pairs) on Ray workers; yields ``(index, row, execution)``
-    as results arrive (``index``: the task's position). ``memories``: frozen edge memories by method
-    name, each run's starting point."""
+    """Run ``tasks`` (``(method, problem)`` pairs) on Ray workers, each with ``run`` (e.g.
+    :func:`baselines.evaluation.run_row`); yields ``(index, row, execution)`` as results arrive
+    (``index``: the task's position). ``memories``: frozen edge memories by method name, each
+    run's starting point."""
     ray = init_ray(address)
     payload = ray.put(setup_payload(setup))
     n_workers = max(1, min(len(tasks), int(ray.available_resources().get("CPU", 1))))
     Worker = ray.remote(num_cpus=1)(EvaluationWorker)
-    workers = [Worker.remote(payload, max_cycles) for _ in range(n_workers)]
+    workers = [Worker.remote(payload, run, max_cycles) for _ in range(n_workers)]
     pool = ray.util.ActorPool(workers)
     items = [(i, m, p, seed, (memories or {}).get(m.name)) for i, (m, p) in enumerate(tasks)]
     # the longest runs first (many agents, far goals, a search to plan), so none is left to run alone at the end
@@ -120,4 +130,5 @@ def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycl
             ray.kill(w)
 
 
-__all__ = ["EvaluationWorker", "RAY_HINT", "init_ray", "require_ray", "run_on_ray", "setup_payload"]
+__all__ = ["EvaluationWorker", "MissingExtraError", "RAY_HINT", "RunFn", "init_ray", "require_ray", "run_on_ray",
+           "setup_payload"]

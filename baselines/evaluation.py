@@ -299,7 +299,7 @@ def evaluate(
         from .distributed import run_on_ray
 
         pending: Dict[int, Any] = {}
-        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, address=ray, memories=frozen):
+        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, run_row, address=ray, memories=frozen):
             pending[i] = (row, ex)
             while len(rows) in pending:  # hand rows on in order
                 j = len(rows)

@@ -11,7 +11,7 @@ One update = one minibatch (64 by default) through 3 distance critics and 3 cost
   the paper's encoder: observation, goal and next observation encoded by each) with a plain
   ``nn.Conv2d`` stack over the full views;
 - the same layout with the fast encoder (receptive-field crop, first convolution as one matrix
-  product: the same function, see ``agents.policies.PanoramaEncoder``);
+  product: the same function, see ``agents.encoders.PanoramaEncoder``);
 - the new layout: one shared encoder trained by the critic losses, the actor on detached
   features, observation and goal encoded in one pass, the next observation by the target
   encoder only (the default for images);
@@ -36,7 +36,7 @@ from stable_baselines3.common.logger import configure
 
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3
-from agents.policies import PanoramaEncoder, is_image_space
+from agents.encoders import PanoramaEncoder, is_image_space
 from agents.training import FULL_VIEW_CONV_LAYERS
 
 

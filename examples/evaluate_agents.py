@@ -32,8 +32,8 @@ import torch
 
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3, load_pretrained
+from agents.encoders import is_image_space
 from agents.evaluation import distance_rank_correlation, run_episodes, sample_problems
-from agents.policies import is_image_space
 from agents.training import default_eval_distances
 
 

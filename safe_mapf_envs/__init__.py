@@ -29,9 +29,10 @@ from importlib import metadata as _metadata
 
 from .base import NavigationEnvBase
 from .cost import COST_FUNCTIONS, ObstacleField
+from .factories import env, parallel_env, raw_env
 from .formats import OBSERVATION_FORMATS, flat_space, flatten_observation
 from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
-from .multi_agent import SafeMultiNavigationEnv, env, parallel_env, raw_env
+from .multi_agent import SafeMultiNavigationEnv
 from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
 from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout

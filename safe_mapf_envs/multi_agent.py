@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
-from pettingzoo import AECEnv, ParallelEnv
-from pettingzoo.utils import wrappers
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo import ParallelEnv
 
 from .base import RENDER_MODES, NavigationEnvBase
 from .checks import (
@@ -38,7 +36,6 @@ from .checks import (
     show,
 )
 from .formats import flat_space, flatten_agents
-from .registration import env_spec
 from .scenario import RANDOM_FILL
 from .world import World
 
@@ -360,37 +357,9 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
 
     # ----------------------------------------------------------------- problem set-up
     def _check_positions(self, points, what: str) -> np.ndarray:
-        """Validate user-given starts or goals: one free position per agent, no two overlapping."""
-        n, sc = self.n_agents, self.scenario
-        try:
-            raw = np.asarray(points)
-            if raw.dtype.kind == "c":
-                raise TypeError("complex positions")
-            p = raw.astype(np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"{what}s must be one real (x, y) pair per agent ({plural(n, 'agent')}), got {show(points)}"
-            ) from exc
-        if p.shape != (n, 2):
-            raise ValueError(f"{what}s must be one (x, y) pair per agent: shape ({n}, 2), got shape {p.shape}")
-        finite = np.isfinite(p).all(axis=1)
-        ok = finite.copy()
-        ok[finite] = sc.is_free(p[finite])
-        if not ok.all():
-            i = int(np.flatnonzero(~ok)[0])
-            sc.check_position(p[i], f"{what} of agent_{i}")  # raises with the precise reason
-        if not self.agent_collisions:  # agents pass through each other: overlapping is fine
-            return p
-        diff = p[:, None] - p[None]
-        dist = np.sqrt((diff * diff).sum(-1))
-        close = np.triu(dist < 2.0 * sc.agent_radius, k=1)
-        if close.any():
-            i, j = (int(k) for k in np.argwhere(close)[0])
-            raise ValueError(
-                f"{what}s of agent_{i} and agent_{j} are {dist[i, j]:.4g} apart, closer than "
-                f"2 * agent_radius = {2.0 * sc.agent_radius:g}: the agents would overlap"
-            )
-        return p
+        """Validate user-given starts or goals (see :meth:`NavigationScenario.check_agent_positions
+        <safe_mapf_envs.scenario.NavigationScenario.check_agent_positions>`)."""
+        return self.scenario.check_agent_positions(points, self.n_agents, what, overlap_ok=not self.agent_collisions)
 
     def _sample_separated(self, rng: np.random.Generator, what: str, max_cost: Optional[float] = None) -> np.ndarray:
         """``n_agents`` free positions at least ``min_separation`` apart.
@@ -404,32 +373,10 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         )
 
     def _sample_goals_in_band(self, starts: np.ndarray, band, rng: np.random.Generator) -> np.ndarray:
-        """One goal per agent at a geodesic distance from its own start within ``band``.
-
-        Each goal needs a geodesic query from its own start, hence one draw per agent; a draw
-        too close to an earlier agent's goal is repeated.
-        """
-        sc, sep = self.scenario, self.min_separation
-        fit = sc.max_agents(sep, RANDOM_FILL)
-        if len(starts) > max(fit, 1):
-            raise ValueError(
-                f"could not place {plural(len(starts), 'goal')} at least min_separation={sep:g} apart on "
-                f"{sc.layout.name}: random sampling fits about {plural(fit, 'goal')} at that separation; "
-                "use fewer agents or a smaller min_separation"
-            )
-        goals = np.empty_like(starts)
-        for i, start in enumerate(starts):
-            for _ in range(100):
-                g = sc.sample_goal_in_band(start, band, rng)
-                if i == 0 or np.min(np.hypot(*(goals[:i] - g).T)) >= sep:
-                    goals[i] = g
-                    break
-            else:
-                raise ValueError(
-                    f"could not place the goal of agent_{i} in the goal_distance band {show(tuple(band))} at least "
-                    f"min_separation={sep:g} from the other goals; use fewer agents or a wider band"
-                )
-        return goals
+        """One goal per agent at a geodesic distance from its own start within ``band``, at least
+        ``min_separation`` apart (see :meth:`NavigationScenario.sample_goals_in_band
+        <safe_mapf_envs.scenario.NavigationScenario.sample_goals_in_band>`)."""
+        return self.scenario.sample_goals_in_band(starts, band, self.min_separation, rng)
 
     # ----------------------------------------------------------------- observations
     def _observe(self, idx: np.ndarray) -> Dict[str, Any]:
@@ -642,70 +589,4 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         )
 
 
-# --------------------------------------------------------------------- factories
-def parallel_env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> SafeMultiNavigationEnv:
-    """The multi-agent env on the map of a registered single-agent id.
-
-    Args:
-        env_id: a registered id such as ``"SafeCentralObstacle-v0"`` (the
-            ``"safe_mapf_envs:"`` prefix is accepted); its map, observation type and keyword
-            arguments are inherited.
-        n_agents: number of agents.
-        **kwargs: :class:`SafeMultiNavigationEnv` arguments (``render_mode``, ``max_cycles``,
-            ...); they override the id's.
-    """
-    try:
-        spec = env_spec(env_id)
-    except KeyError as exc:
-        raise ValueError(exc.args[0]) from None
-    merged = {**spec.kwargs, **kwargs}
-    merged.setdefault("layout", spec.layout)
-    if spec.obs_type != "vector":
-        merged.setdefault("obs_type", spec.obs_type)
-    return SafeMultiNavigationEnv(n_agents=n_agents, **merged)
-
-
-def raw_env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> AECEnv:
-    """The AEC form of :func:`parallel_env`, without wrappers."""
-    return parallel_to_aec(parallel_env(env_id, n_agents=n_agents, **kwargs))
-
-
-def env(env_id: str = "SafeCentralObstacle-v0", n_agents: int = 4, **kwargs) -> AECEnv:
-    """The AEC form of :func:`parallel_env` with PettingZoo's order-enforcing wrapper."""
-    return wrappers.OrderEnforcingWrapper(raw_env(env_id, n_agents=n_agents, **kwargs))
-
-
-def map_factories(
-    env_id: str, module: str
-) -> Tuple[Callable[..., SafeMultiNavigationEnv], Callable[..., AECEnv], Callable[..., AECEnv]]:
-    """``(parallel_env, raw_env, env)`` bound to one registered id, for a per-map module.
-
-    The functions take ``n_agents=4`` and the keyword arguments of
-    :class:`SafeMultiNavigationEnv`; they are named after ``module`` so they pickle.
-    """
-    spec = env_spec(env_id)
-
-    def _parallel_env(n_agents: int = 4, **kwargs) -> SafeMultiNavigationEnv:
-        return parallel_env(spec.id, n_agents=n_agents, **kwargs)
-
-    def _raw_env(n_agents: int = 4, **kwargs) -> AECEnv:
-        return raw_env(spec.id, n_agents=n_agents, **kwargs)
-
-    def _env(n_agents: int = 4, **kwargs) -> AECEnv:
-        return env(spec.id, n_agents=n_agents, **kwargs)
-
-    docs = {
-        "parallel_env": f"The {spec.layout} map with ``n_agents`` agents (PettingZoo parallel API).",
-        "raw_env": f"The {spec.layout} map with ``n_agents`` agents, AEC form without wrappers.",
-        "env": f"The {spec.layout} map with ``n_agents`` agents, AEC form with the order-enforcing wrapper.",
-    }
-    out = []
-    for name, fn in (("parallel_env", _parallel_env), ("raw_env", _raw_env), ("env", _env)):
-        fn.__name__ = fn.__qualname__ = name
-        fn.__module__ = module
-        fn.__doc__ = docs[name] + " Keyword arguments as for :class:`SafeMultiNavigationEnv`."
-        out.append(fn)
-    return tuple(out)  # type: ignore[return-value]
-
-
-__all__ = ["SafeMultiNavigationEnv", "env", "map_factories", "parallel_env", "raw_env"]
+__all__ = ["SafeMultiNavigationEnv"]

@@ -344,4 +344,69 @@ class NavigationScenario:
         )
 
 
+    def check_agent_positions(self, points, n: int, what: str, overlap_ok: bool = False) -> np.ndarray:
+        """Validate user-given starts or goals as an ``(n, 2)`` array: one free position per agent,
+        no two overlapping (unless ``overlap_ok``: agents that pass through each other);
+        ``ValueError`` naming the agent and the problem otherwise. ``what`` names the positions."""
+        try:
+            raw = np.asarray(points)
+            if raw.dtype.kind == "c":
+                raise TypeError("complex positions")
+            p = raw.astype(np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"{what}s must be one real (x, y) pair per agent ({plural(n, 'agent')}), got {show(points)}"
+            ) from exc
+        if p.shape != (n, 2):
+            raise ValueError(f"{what}s must be one (x, y) pair per agent: shape ({n}, 2), got shape {p.shape}")
+        finite = np.isfinite(p).all(axis=1)
+        ok = finite.copy()
+        ok[finite] = self.is_free(p[finite])
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            self.check_position(p[i], f"{what} of agent_{i}")  # raises with the precise reason
+        if overlap_ok:  # agents pass through each other: overlapping is fine
+            return p
+        diff = p[:, None] - p[None]
+        dist = np.sqrt((diff * diff).sum(-1))
+        close = np.triu(dist < 2.0 * self.agent_radius, k=1)
+        if close.any():
+            i, j = (int(k) for k in np.argwhere(close)[0])
+            raise ValueError(
+                f"{what}s of agent_{i} and agent_{j} are {dist[i, j]:.4g} apart, closer than "
+                f"2 * agent_radius = {2.0 * self.agent_radius:g}: the agents would overlap"
+            )
+        return p
+
+    def sample_goals_in_band(self, starts: np.ndarray, band: Tuple[float, float], min_separation: float,
+                             rng: np.random.Generator) -> np.ndarray:
+        """One goal per start at a geodesic distance from it within ``band``, the goals at least
+        ``min_separation`` apart.
+
+        Each goal needs a geodesic query from its own start, hence one draw per agent; a draw
+        too close to an earlier agent's goal is repeated.
+        """
+        sep = float(min_separation)
+        fit = self.max_agents(sep, RANDOM_FILL)
+        if len(starts) > max(fit, 1):
+            raise ValueError(
+                f"could not place {plural(len(starts), 'goal')} at least min_separation={sep:g} apart on "
+                f"{self.layout.name}: random sampling fits about {plural(fit, 'goal')} at that separation; "
+                "use fewer agents or a smaller min_separation"
+            )
+        goals = np.empty_like(starts)
+        for i, start in enumerate(starts):
+            for _ in range(100):
+                g = self.sample_goal_in_band(start, band, rng)
+                if i == 0 or np.min(np.hypot(*(goals[:i] - g).T)) >= sep:
+                    goals[i] = g
+                    break
+            else:
+                raise ValueError(
+                    f"could not place the goal of agent_{i} in the goal_distance band {show(tuple(band))} at least "
+                    f"min_separation={sep:g} from the other goals; use fewer agents or a wider band"
+                )
+        return goals
+
+
 __all__ = ["Layout", "NavigationScenario", "RANDOM_FILL", "resolve_layout", "union_area"]

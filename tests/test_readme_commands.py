@@ -1,4 +1,5 @@
-"""The README's shell commands: every one parses as written, and the cheap ones run.
+"""The shell commands of the README and of the documentation pages (``docs/**/*.md``): every one
+parses as written, and the cheap ones run.
 
 Commands are collected from the ``bash`` blocks (continuation lines joined, the apartment loop
 run for one apartment) and from inline code that starts with ``safe-mapf`` or
@@ -18,12 +19,12 @@ import pytest
 from baselines.cli import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text()
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]
 
 #: Scripts without arguments: nothing to parse, and they do their (long) work at once.
 NO_ARGUMENTS = {"examples/demo.py", "examples/plan_and_execute.py"}
 #: Inline mentions of a command's name rather than commands.
-NAMES = {"safe-mapf mapf"}
+NAMES = {"safe-mapf", "safe-mapf mapf"}
 #: Commands cheap enough to run in full (they read shipped result files).
 CHEAP = {
     "safe-mapf envs",
@@ -33,31 +34,40 @@ CHEAP = {
 }
 
 
-def readme_commands():
+def page_commands(text: str):
+    """The commands of one Markdown text (see the module docstring)."""
     cmds = []
-    for block in re.findall(r"```bash\n(.*?)```", README, flags=re.S):
-        text = block.replace("\\\n", " ")
-        for line in text.splitlines():
+    for block in re.findall(r"```bash\n(.*?)```", text, flags=re.S):
+        joined = block.replace("\\\n", " ")
+        for line in joined.splitlines():
             line = line.split("#", 1)[0].strip()
             line = line.replace("SafeApartment$a-v0", "SafeApartment0-v0").replace("apt$a", "apt0")
             if line.startswith(("safe-mapf ", "python examples/")):
                 cmds.append(" ".join(line.split()))
-    for code in re.findall(r"`((?:OMP_NUM_THREADS=1 )?(?:safe-mapf|python examples/)[^`]*)`", README):
+    for code in re.findall(r"`((?:OMP_NUM_THREADS=1 )?(?:safe-mapf|python examples/)[^`]*)`", text):
         cmds.append(" ".join(code.replace("OMP_NUM_THREADS=1 ", "").split()))
-    return sorted({c for c in cmds if not re.search(r"\.\.\.|\[|F,K,S|\|", c)} - NAMES)
+    return {c for c in cmds if not re.search(r"\.\.\.|\[|F,K,S|\|", c)} - NAMES
 
 
-COMMANDS = readme_commands()
+PAGE_COMMANDS = {page.relative_to(ROOT).as_posix(): page_commands(page.read_text()) for page in PAGES}
+COMMANDS = sorted(set().union(*PAGE_COMMANDS.values()))
 
 
 class _Parsed(Exception):
     """Raised right after a script's parse_args accepted its arguments."""
 
 
-def test_the_readme_has_commands_of_both_kinds():
-    assert any(c.startswith("safe-mapf evaluate") for c in COMMANDS)
+def test_the_readme_and_the_docs_have_commands_of_both_kinds():
+    assert any(c.startswith("safe-mapf evaluate") for c in PAGE_COMMANDS["README.md"])
     assert any(c.startswith("python examples/centerdot_table.py") for c in COMMANDS)
+    assert any(c.startswith("python examples/bench_cbs.py") for c in PAGE_COMMANDS["docs/mapf.md"])
     assert CHEAP <= set(COMMANDS)
+
+
+def test_commands_are_read_from_bash_blocks_and_inline_code():
+    text = ("Run `safe-mapf envs` or:\n\n```bash\nsafe-mapf evaluate --agents 1 \\\n    --problems 2  # two\n"
+            "safe-mapf train ... --resume\n```\n")
+    assert page_commands(text) == {"safe-mapf envs", "safe-mapf evaluate --agents 1 --problems 2"}
 
 
 @pytest.mark.parametrize("command", COMMANDS)

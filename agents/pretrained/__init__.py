@@ -43,13 +43,14 @@ def load_pretrained(env_id: str, kind: str = "unconstrained", device: str = "cpu
     """Load the shipped ``kind`` checkpoint of ``env_id`` (or the checkpoint at ``path``).
 
     The checkpoint must have been trained on ``env_id`` and fit its observation and action
-    spaces; otherwise :class:`~agents.algorithm.CheckpointError` names the mismatch.
+    spaces; otherwise :class:`~agents.checkpoints.CheckpointError` names the mismatch.
     """
     import gymnasium as gym
 
     import safe_mapf_envs  # noqa: F401
 
-    from ..algorithm import CheckpointError, SafeGoalTD3
+    from ..algorithm import SafeGoalTD3
+    from ..checkpoints import CheckpointError
 
     env_id = str(env_id).split(":")[-1]
     ckpt = path if path is not None else pretrained_path(env_id, kind)

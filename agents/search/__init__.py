@@ -17,15 +17,13 @@ without a critic.
 - :func:`build_problem_graph`: the one pipeline from critic matrices to a problem's pruned graph
   (endpoint attachment, cost cut-off, local relaxation), used by the planner.
 """
-from .cbs import CBSResult, CBSSolver, solve_cbs
 from .controller import AgentPlan, WaypointController
 from .graph import ProblemGraph, WaypointGraph, build_problem_graph
-from .mapf_instance import MapfInstance, Proximity, integer_durations
+from .mapf import CBSResult, CBSSolver, MapfInstance, Proximity, integer_durations, solve_cbs, validate
 from .models import distance_fn, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
 from .policy import SearchPolicy
 from .single import Plan, risk_bounded_path, shortest_path
-from .validate import validate
 
 __all__ = [
     "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "ProblemGraph",

@@ -97,7 +97,7 @@ def _reads_images(model: Any) -> bool:
     """Whether ``model`` observes images (its observation space, or that space's ``observation`` entry)."""
     from gymnasium import spaces
 
-    from ..policies import is_image_space
+    from ..encoders import is_image_space
 
     space = getattr(model, "observation_space", None)
     if isinstance(space, spaces.Dict) and "observation" in space.spaces:

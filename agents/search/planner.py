@@ -42,12 +42,11 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .cbs import CBSResult, CBSSolver
 from .controller import AgentPlan
 from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
+from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.prioritized import solve_prioritized
-from .mapf_instance import Proximity
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
 

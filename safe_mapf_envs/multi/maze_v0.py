@@ -4,7 +4,7 @@
 ``safe_mapf_envs.parallel_env("SafeMaze-v0", n_agents, ...)``; see
 :class:`safe_mapf_envs.multi_agent.SafeMultiNavigationEnv` for the arguments.
 """
-from ..multi_agent import map_factories
+from ..factories import map_factories
 
 ENV_ID = "SafeMaze-v0"
 

@@ -8,9 +8,9 @@ from stable_baselines3.common.logger import configure
 
 import safe_mapf_envs  # noqa: F401
 from agents import SafeGoalTD3
-from agents.algorithm import RandomShift
+from agents.augmentation import RandomShift
+from agents.encoders import PanoramaEncoder
 from agents.evaluation import sample_problems
-from agents.policies import PanoramaEncoder
 from agents.self_sampling import observations_at
 
 th.set_num_threads(1)

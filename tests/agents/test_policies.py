@@ -6,7 +6,8 @@ import torch as th
 from gymnasium import spaces
 
 import safe_mapf_envs  # noqa: F401
-from agents.policies import GoalPairExtractor, PanoramaEncoder, SafeGoalPolicy
+from agents.encoders import GoalPairExtractor, PanoramaEncoder
+from agents.policies import SafeGoalPolicy
 
 
 def const_lr(_):

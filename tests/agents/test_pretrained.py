@@ -1,5 +1,6 @@
 """The shipped checkpoints: present, small, loadable, sensible; clear errors otherwise."""
 import os
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -108,3 +109,28 @@ def test_centerdot_agents_are_shipped_and_the_constrained_one_is_safer():
         out[kind] = run_episodes(m, env, s, g)
         assert out[kind]["success"].mean() >= 0.9
     assert out["constrained"]["cost"].mean() < out["unconstrained"]["cost"].mean()
+
+
+def test_every_shipped_checkpoint_names_classes_that_still_exist():
+    """SB3 stores the classes a checkpoint needs (policy, replay buffer, Lagrange multiplier) by
+    module path; moving one of them would make its load drop or fail. Each stored object
+    deserialises, and the policy class is the one SafeGoalTD3 builds."""
+    import base64
+    import json
+    import zipfile
+
+    import cloudpickle
+
+    from agents.buffers import GoalCostReplayBuffer
+    from agents.lagrangian import LagrangeMultiplier
+    from agents.policies import SafeGoalPolicy
+
+    checkpoints = sorted(Path(pretrained_path(ENV, "unconstrained")).parent.glob("*.zip"))
+    assert len(checkpoints) >= 12
+    for path in checkpoints:
+        data = json.loads(zipfile.ZipFile(path).read("data"))
+        objects = {key: cloudpickle.loads(base64.b64decode(value[":serialized:"]))
+                   for key, value in data.items() if isinstance(value, dict) and ":serialized:" in value}
+        assert objects["policy_class"] is SafeGoalPolicy, path.name
+        assert objects["replay_buffer_class"] is GoalCostReplayBuffer, path.name
+        assert isinstance(objects["lagrangian"], LagrangeMultiplier), path.name

@@ -3,9 +3,8 @@ import numpy as np
 import pytest
 
 from agents.search.controller import AgentPlan
-from agents.search.mapf_instance import Proximity
+from agents.search.mapf import Proximity, validate
 from agents.search.planner import BufferPlanner, direct_plans, waypoints_from_paths
-from agents.search.validate import validate
 
 
 def euclid_pairwise(hot=None, hot_radius=0.0, hot_cost=10.0):
@@ -185,7 +184,7 @@ def test_a_single_agent_gets_the_path_cbs_would_give(time_model):
     dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0) if time_model == "durative" else np.ones_like(dur.data)
     n = len(pts)
-    from agents.search.cbs import solve_cbs
+    from agents.search.mapf import solve_cbs
 
     ref = solve_cbs(dur, [n], [n + 1], time_model=time_model, suboptimality=1.0)
     assert plan.soc == ref.soc

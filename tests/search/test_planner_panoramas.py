@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs  # noqa: F401
-from agents.search.mapf_instance import Proximity
+from agents.search.mapf import Proximity, validate
 from agents.search.planner import BufferPlanner
-from agents.search.validate import validate
 from agents.self_sampling import observations_at
 
 

@@ -8,7 +8,10 @@ first the splits whose children get larger lower bounds; a child that must raise
 cost is planned only when it is popped. Target conflicts can be split disjointly, and agents
 that keep conflicting can be merged into meta-agents (MA-CBS) planned by the coupled search of
 :mod:`agents.search.mapf.coupled`. The same class solves the two-agent sub-problems of the WDG
-heuristic. Bounded-suboptimal ECBS is in :mod:`agents.search.mapf.ecbs`.
+heuristic. Its parts live in one module each: conflict classification and the symmetric splits
+in :mod:`agents.search.mapf.classify`, meta-agents in :mod:`agents.search.mapf.merging`, the
+heuristics in :mod:`agents.search.mapf.heuristics`. Bounded-suboptimal ECBS is in
+:mod:`agents.search.mapf.ecbs`.
 """
 from __future__ import annotations
 
@@ -16,39 +19,29 @@ import heapq
 import time as _time
 from typing import Dict, List, Optional, Sequence, Set, Tuple, Union
 
+from .classify import ConflictClassification
 from .conflicts import (
     CARDINAL,
-    EDGE,
-    NON_CARDINAL,
-    SEMI_CARDINAL,
     TARGET,
-    VERTEX,
     Branches,
     Conflict,
-    SymmetricSplit,
     pair_conflicts,
 )
 from .constraints import (
-    EMPTY,
     FOREVER,
     Constraint,
     ConstraintSet,
     DeadlineConstraint,
-    EdgeConstraint,
     LengthConstraint,
     RangeConstraint,
-    VertexConstraint,
 )
 from .context import SearchContext
-from .coupled import CoupledLimit, coupled_astar
+from .coupled import CoupledLimit
 from .ctnode import ConflictMap, CTNode
-from .heuristics import ANCESTORS, INFEASIBLE, ConflictGraphHeuristics
-from .lowlevel import earliest_arrival, space_time_astar
-from .mdd import MDD, build_mdd, prune_mdd
+from .heuristics import INFEASIBLE, ConflictGraphHeuristics
+from .lowlevel import space_time_astar
+from .merging import MetaAgentMerging
 from .paths import AgentPath, Reservation, satisfies
-
-#: coupled searches may always expand this many states in a solve (see ``merge_budget``)
-MERGE_BASE_STATES = 250_000
 
 #: A branch's constraints by local agent: ``{i: (its new constraint set, the constraints added)}``.
 Changes = Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]
@@ -56,7 +49,7 @@ Changes = Dict[int, Tuple[ConstraintSet, Tuple[Constraint, ...]]]
 ChildParts = Tuple[List[AgentPath], List[ConstraintSet], int, ConflictMap, Optional[Tuple[Tuple[int, ...], ...]]]
 
 
-class CBSSearch(ConflictGraphHeuristics):
+class CBSSearch(MetaAgentMerging, ConflictClassification, ConflictGraphHeuristics):
     """One CBS search (the main one, or a two-agent sub-problem of the WDG heuristic).
 
     ``agents`` are the global ids of the agents it plans (its local agent ``i`` is ``agents[i]``),
@@ -69,7 +62,7 @@ class CBSSearch(ConflictGraphHeuristics):
     ``merge_node_limit`` expansions and that merge is not tried again; no meta-agent grows past
     ``merge_max_agents`` members, nor any whose joint configurations (nodes to the power of
     its members) outnumber ``merge_space_limit`` (``None``: no limit). Coupled searches may
-    expand :data:`MERGE_BASE_STATES` plus ``merge_budget`` times as many states as the other
+    expand :data:`~agents.search.mapf.merging.MERGE_BASE_STATES` plus ``merge_budget`` times as many states as the other
     low-level searches; past that no merge is made and meta-agents that need replanning are
     split up again. ``disjoint_target``
     (unit time, with target reasoning): split target conflicts disjointly (see
@@ -160,127 +153,6 @@ class CBSSearch(ConflictGraphHeuristics):
                         disjoint_target=self.disjoint_target, pseudo_corridors=self.pseudo_corridors)
         status, best = sub.run()
         return status, best, sub.lower_bound
-
-    # -------------------------------------------------------------- MDDs and classification
-    def _mdd(self, node: CTNode, i: int) -> MDD:
-        gid = self.agents[i]
-        cons = node.cons[i]
-        key = (gid, cons.content)
-        ctx = self.ctx
-        m = ctx.mdds.get(key)
-        if m is None:
-            ctx.check_time()
-            cc = ctx.compile(gid, cons)
-            cost = node.paths[i].cost
-            if self.inst.unit:
-                # an ancestor constraint set's MDD of the same cost, pruned, is this one
-                anc = cons.parent
-                for _ in range(ANCESTORS):
-                    if anc is None:
-                        break
-                    old = ctx.mdds.get((gid, anc.content))
-                    if old is not None and old.cost == cost:
-                        m = prune_mdd(old, cc)
-                        break
-                    anc = anc.parent
-            if m is None:
-                m = build_mdd(self.inst, gid, cc, cost)
-            ctx.stats.mdds += 1
-            if len(ctx.mdds) > 50_000:
-                ctx.mdds.clear()
-            ctx.mdds[key] = m
-        return m
-
-    def _raises_cost(self, node: CTNode, i: int, constraints: Sequence[Constraint]) -> bool:
-        """Whether every optimal path of local agent ``i`` violates ``constraints``."""
-        path = node.paths[i]
-        cost = path.cost
-        for c in constraints:
-            if isinstance(c, LengthConstraint):
-                if c.time >= cost:
-                    return True
-                continue
-            if isinstance(c, VertexConstraint):
-                if c.time >= cost:
-                    if c.node == path.goal:
-                        return True
-                    continue
-                m = self._mdd(node, i)
-                if c.node in m.must[c.time]:
-                    return True
-                continue
-            if isinstance(c, EdgeConstraint):
-                if c.time + 1 > cost:
-                    continue
-                m = self._mdd(node, i)
-                if c.u in m.must[c.time] and c.v in m.must[c.time + 1]:
-                    return True
-                continue
-            if isinstance(c, RangeConstraint):
-                m = self._mdd(node, i)
-                if c.end >= FOREVER:
-                    if not m.avoidable(c.node, c.start, self.inst.unit):
-                        return True
-                continue
-        return False
-
-    def _classify(self, node: CTNode, c: Conflict) -> int:
-        if c.cls is not None:
-            return c.cls
-        (i1, cons1), (i2, cons2) = c.branches(self.tr)
-        l1, l2 = self.local[i1], self.local[i2]
-        # a member of a meta-agent has no MDD of its own: its side is not known to raise the cost
-        c.card1 = len(self._members(node, l1)) == 1 and self._raises_cost(node, l1, cons1)
-        c.card2 = len(self._members(node, l2)) == 1 and self._raises_cost(node, l2, cons2)
-        c.cls = CARDINAL if (c.card1 and c.card2) else (SEMI_CARDINAL if (c.card1 or c.card2) else NON_CARDINAL)
-        return c.cls
-
-    def _symmetric_split(self, node: CTNode, c: Conflict) -> Optional[SymmetricSplit]:
-        """A corridor, pseudo-corridor or rectangle split for ``c``: ``(class, branches, forced,
-        kind)``, or ``None``."""
-        ctx = self.ctx
-        if c.kind not in (VERTEX, EDGE):
-            return None
-        l1, l2 = self.local[c.a1], self.local[c.a2]
-        if len(self._members(node, l1)) > 1 or len(self._members(node, l2)) > 1:
-            return None  # the splits read the agents' own MDDs
-        p1, p2 = node.paths[l1], node.paths[l2]
-        corridors = ctx.corridors()
-        if corridors is not None:
-            def earliest(gid: int, target: int, cid: Optional[int]) -> int:
-                cons = node.cons[self.local[gid]]
-                key = (gid, cons.content, target, cid)
-                val = ctx.arrivals.get(key)
-                if val is None:
-                    blocked = corridors.inner_sets[cid] if cid is not None else frozenset()
-                    val = earliest_arrival(self.inst, gid, ctx.compile(gid, cons), target, blocked,
-                                           ctx.deadline, ctx.counter)
-                    if len(ctx.arrivals) > 200_000:
-                        ctx.arrivals.clear()
-                    ctx.arrivals[key] = val
-                return val
-
-            br = corridors.split(c, c.a1, p1, c.a2, p2, earliest)
-            kind = "corridor"
-            if br is None and self.pseudo_corridors:
-                br = corridors.pseudo_split(c, c.a1, self._mdd(node, l1), c.a2, self._mdd(node, l2), earliest)
-                kind = "pseudo"
-            if br is not None:
-                cards = []
-                for gid, cons in br:
-                    i = self.local[gid]
-                    rc = cons[0]
-                    assert isinstance(rc, RangeConstraint)  # corridor splits are range constraints
-                    m = self._mdd(node, i)
-                    cards.append(not m.avoidable(rc.node, rc.start, True, rc.end))
-                cls = CARDINAL if all(cards) else (SEMI_CARDINAL if any(cards) else NON_CARDINAL)
-                return cls, br, tuple(cards), kind
-        geom = ctx.geometry
-        if geom is not None and c.kind == VERTEX:
-            br = geom.split(c, c.a1, self._mdd(node, l1), c.a2, self._mdd(node, l2))
-            if br is not None:
-                return CARDINAL, br, (True, True), "rectangle"
-        return None
 
     def _choose(self, node: CTNode) -> Branches:
         """The conflict to split on and its branches ``[(agent, constraints), ...]``."""
@@ -618,134 +490,3 @@ class CBSSearch(ConflictGraphHeuristics):
         node.f = max(node.f, node.g)
         node.h = node.f - node.g
         return True
-
-    # -------------------------------------------------------------- meta-agents (MA-CBS)
-    def _members(self, node: CTNode, i: int) -> Tuple[int, ...]:
-        """The local agents planned together with local agent ``i`` (``(i,)`` when it is alone)."""
-        groups = node.groups
-        return (i,) if groups is None else groups[i]
-
-    def _merging_affordable(self) -> bool:
-        """Whether coupled searches may still run: they have expanded at most
-        ``MERGE_BASE_STATES + merge_budget * (the other low-level expansions)`` states so far."""
-        spent = self.coupled_expanded
-        others = self.ctx.counter.expanded - spent
-        return spent <= MERGE_BASE_STATES + self.merge_budget * others
-
-    def _plan_group(self, members: Tuple[int, ...], cons: Sequence[ConstraintSet],
-                    paths: Sequence[Optional[AgentPath]]) -> Optional[List[AgentPath]]:
-        """The cheapest joint paths of a meta-agent under its members' constraints (coupled
-        search), fewest conflicts with the other ``paths``; ``None`` if there are none.
-
-        Memoised by the members' constraint contents (a remembered plan is still a cheapest one;
-        only its conflicts with the other agents may differ)."""
-        ctx = self.ctx
-        gids = [self.agents[i] for i in members]
-        ccs = [ctx.compile(gid, cons[i]) for gid, i in zip(gids, members)]
-        key = (tuple(gids), tuple(cons[i].content for i in members))
-        if key in ctx.coupled:
-            known = ctx.coupled[key]
-            if known is None:
-                return None
-            if isinstance(known, CoupledLimit):
-                raise known
-            return list(known)
-        inside = set(members)
-        others = [None if k in inside else p for k, p in enumerate(paths)]
-        res = Reservation(others, -1, self.inst) if len(paths) > len(members) else None
-        if len(ctx.coupled) > 50_000:
-            ctx.coupled.clear()
-        before = ctx.counter.expanded
-        try:
-            out = coupled_astar(self.inst, gids, ccs, res, ctx.deadline, ctx.counter, self.merge_node_limit)
-        except CoupledLimit as e:
-            ctx.coupled[key] = e
-            raise
-        finally:
-            self.coupled_expanded += ctx.counter.expanded - before
-        if out is None:
-            ctx.coupled[key] = None
-            return None
-        planned = [AgentPath(ev, self.inst) for ev in out]
-        ctx.coupled[key] = tuple(planned)
-        return planned
-
-    def _count_split(self, branches: Branches) -> None:
-        """Count a split of two agents' conflict (unit time) in :attr:`conflict_counts`."""
-        if len(branches) != 2 or not self.inst.unit:
-            return
-        a, b = self.agents[self.local[branches[0][0]]], self.agents[self.local[branches[1][0]]]
-        if a != b:
-            key = (a, b) if a < b else (b, a)
-            self.conflict_counts[key] = self.conflict_counts.get(key, 0) + 1
-
-    def _merge(self, node: CTNode, branches: Branches) -> str:
-        """Merge the two (meta-)agents of the conflict being split (counted already) once they
-        have conflicted more than ``merge_threshold`` times in the search.
-
-        Returns ``"merged"`` (the node now plans them as one meta-agent under the same
-        constraints: the same part of the solution space, so it replaces itself), ``"dead"`` (the
-        meta-agent has no plan under the node's constraints: nor has the node) or ``"split"``
-        (no merge: split as usual). A merge whose coupled search passes ``merge_node_limit``
-        expansions is not tried again.
-        """
-        if len(branches) != 2 or not self.inst.unit:
-            return "split"
-        a, b = self.agents[self.local[branches[0][0]]], self.agents[self.local[branches[1][0]]]
-        if a == b:
-            return "split"
-        counts = self.conflict_counts  # this split is counted already (_count_split)
-        g1, g2 = self._members(node, self.local[a]), self._members(node, self.local[b])
-        if g1 == g2:
-            return "split"
-        total = 0
-        for i in g1:
-            for j in g2:
-                x, y = self.agents[i], self.agents[j]
-                total += counts.get((x, y) if x < y else (y, x), 0)
-        if self.merge_threshold is None or total <= self.merge_threshold or not self._merging_affordable():
-            return "split"
-        members = tuple(sorted(g1 + g2))
-        if len(members) > self.merge_max_agents:
-            return "split"
-        if self.merge_space_limit is not None and self.inst.n_nodes ** len(members) > self.merge_space_limit:
-            return "split"
-        gkey = frozenset(self.agents[i] for i in members)
-        if gkey in self.merge_failed:
-            return "split"
-        ctx = self.ctx
-        try:
-            if not self.sub and any(len(node.cons[i]) for i in members):
-                # first the members alone without constraints (memoised): no joint plan proves
-                # the whole instance infeasible
-                if self._plan_group(members, [EMPTY] * len(node.cons), node.paths) is None:
-                    ids = ", ".join(str(self.agents[i]) for i in members)
-                    ctx.infeasible_reason = (
-                        f"agents {ids} cannot all reach their goals: every joint plan of these agents makes two of "
-                        "them collide (each may reach its goal alone; the other agents aside)")
-                    self.proven_infeasible = True
-                    return "dead"
-            planned = self._plan_group(members, node.cons, node.paths)
-        except CoupledLimit:
-            self.merge_failed.add(gkey)
-            return "split"
-        ctx.stats.merges += 1
-        if planned is None:
-            return "dead"
-        paths = list(node.paths)
-        for i, p in zip(members, planned):
-            paths[i] = p
-        groups: List[Tuple[int, ...]] = (list(node.groups) if node.groups is not None
-                                         else [(i,) for i in range(len(paths))])
-        for i in members:
-            groups[i] = members
-        node.groups = tuple(groups)
-        node.g = node.g + sum(paths[i].cost - node.paths[i].cost for i in members)
-        node.set_conflicts(self._redetect(node.conflicts, members, paths))
-        node.paths = paths
-        node.f = max(node.f, node.g)
-        node.h = node.f - node.g
-        node.h_done = False
-        node.hedges = None
-        node.hmemo = None
-        return "merged"
