@@ -1,11 +1,11 @@
 """Success against the number of agents, in the metrics the MAPF learning community reads.
 
-Reads the ``runs.csv`` of ``safe-mapf evaluate`` output folders (one per environment), prints
-one Markdown table per folder and draws one figure: per agent count, CSR (the share of runs in
-which every agent arrived), ISR (the mean share of agents arrived), the sum of costs per agent
-and the makespan (POGEMA's definitions: an agent that never arrives counts the run's length),
-and our largest cumulative safety cost over agents and contacts between agents (means over all
-runs). The figures of ``docs/many_agents.md`` come from::
+Reads the ``runs.csv`` of ``safe-mapf evaluate`` output folders (one per environment, named by
+the folder's name), prints one Markdown table per folder and draws one figure: per agent count,
+CSR (the share of runs in which every agent arrived), ISR (the mean share of agents arrived),
+the sum of costs per agent and the makespan (POGEMA's definitions: an agent that never arrives
+counts the run's length), and our largest cumulative safety cost over agents and contacts
+between agents (means over all runs). The figures of ``docs/many_agents.md`` come from::
 
     safe-mapf evaluate --agents 1 5 10 20 50 100 200 --problems 10 --difficulty hard --methods ours \\
         --no-figure --out examples/many_agents/central_obstacle
@@ -85,14 +85,18 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
         axes[2].plot(k, [a["contacts_all_mean"] for a in rows], "s--", color=line.get_color(),
                      label=f"{name}: contacts")
     titles = ["agents arrived (%)", "steps", "per run (mean)"]
+    ticks = sorted({a["agents"] for rows in named.values() for a in rows})
     for ax, title in zip(axes, titles):
         ax.set_xscale("log")
+        ax.set_xticks(ticks, [str(t) for t in ticks])
+        ax.minorticks_off()
         ax.set_xlabel("agents")
         ax.set_title(title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     axes[0].set_ylim(0, 105)
-    axes[2].set_yscale("symlog")
+    axes[2].set_yscale("symlog", linthresh=1.0)
+    axes[2].set_ylim(bottom=0)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -107,8 +111,7 @@ def main() -> None:
     args = p.parse_args()
     named = {}
     for folder in args.folders:
-        meta = folder / "table.md"
-        name = meta.read_text().split(":", 1)[0].strip() if meta.exists() else folder.name
+        name = folder.name
         named[name] = cells(folder, args.method)
         print(markdown(name, named[name]) + "\n")
     if args.out is not None:
