@@ -183,7 +183,7 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
-              "steps", "planning_time", "plan_status", "reached", "c_max", "failures")
+              "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max", "failures")
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
@@ -219,9 +219,28 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
         "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
         "cost_mean": float(ex.cost.mean()), "collisions": ex.collisions, "steps": ex.steps,
         "planning_time": ex.planning_time, "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
+        **mapf_metrics(ex.arrival, ex.steps),
         "c_max": method.c_max if method.search else math.inf, "failures": failures_field(ex.failures),
     }
     return row, ex
+
+
+def mapf_metrics(arrival: np.ndarray, steps: int) -> Dict[str, Any]:
+    """A run in the metrics of the MAPF learning community (POGEMA), from each agent's arrival
+    step (``-1``: it did not arrive) and the run's length in steps.
+
+    ``isr``: the share of agents that arrived (a run with every agent arrived counts for CSR);
+    ``soc``: sum of costs, each agent's steps until it arrived, the run's length for an agent
+    that did not; ``makespan``: the step at which the last agent arrived (the run's length when
+    some agent did not).
+    """
+    arrival = np.asarray(arrival)
+    if arrival.ndim != 1 or len(arrival) == 0:
+        raise ValueError(f"arrival must be a non-empty 1-D array of steps, got shape {arrival.shape}")
+    done = arrival >= 0
+    per_agent = np.where(done, arrival, steps)
+    return {"isr": float(done.mean()), "soc": int(per_agent.sum()),
+            "makespan": int(per_agent.max()) if done.all() else int(steps)}
 
 
 def evaluate(
@@ -448,7 +467,10 @@ def _mean_std(x: np.ndarray):
 
 def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
     """Per (method, agents, difficulty): success rate, mean +- std over successful runs, and the
-    median of the largest cumulative cost over them (``cost_median``)."""
+    median of the largest cumulative cost over them (``cost_median``); and, over all runs as the
+    MAPF learning community reports them (:func:`mapf_metrics`), ``csr`` (the share of runs in
+    which every agent arrived: the success rate), ``isr`` (the mean share of agents arrived),
+    ``soc_mean`` and ``makespan_mean`` (``nan`` where the rows lack them)."""
     groups: Dict[tuple, List[Dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["agents"]), r["difficulty"]), []).append(r)
@@ -465,6 +487,10 @@ def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
         agg["mean_cost_std"] = agg.pop("cost_mean_std")
         # robust to the few runs in which an agent stalls for a long time
         agg["cost_median"] = float(np.median([float(r["cost_max"]) for r in ok])) if ok else math.nan
+        agg["csr"] = agg["success_rate"]
+        for key, name in (("isr", "isr"), ("soc", "soc_mean"), ("makespan", "makespan_mean")):
+            vals = [float(r[key]) for r in rs if r.get(key) not in (None, "")]
+            agg[name] = float(np.mean(vals)) if len(vals) == len(rs) else math.nan
         out.append(agg)
     return out
 
@@ -523,4 +549,4 @@ def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
 
 __all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "REPAIR_SEED_OFFSET",
            "ROW_FIELDS", "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "learn_edge_memory",
-           "make_problems", "markdown_table", "select_c_max", "write_csv"]
+           "make_problems", "mapf_metrics", "markdown_table", "select_c_max", "write_csv"]

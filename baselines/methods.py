@@ -111,6 +111,8 @@ class Execution:
     extra: Dict[str, Any] = field(default_factory=dict)
     #: why each agent that did not arrive failed (see :mod:`baselines.anatomy`)
     failures: List[AgentFailure] = field(default_factory=list)
+    #: per agent, the step at which it arrived (``-1``: it did not)
+    arrival: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def execute(
@@ -201,7 +203,7 @@ def execute(
             planned=plan is None or plan.solved, legs={a: policy.leg(a) for a in names},
             escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
-                     plan.status if plan is not None else "direct", trajectories, extra, failures)
+                     plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at)
 
 
 def _geodesic(env) -> Any:

@@ -19,9 +19,12 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
   agents the problem generator can place in each of the P problems at that difficulty (found by
   bisection, which takes minutes).
 
-Planning time includes attaching the starts and goals with the critics. The machine's load
-average is printed first: every solver call is budgeted in expansions (the planner's default
-``expansion_limit``), so the statuses and costs do not depend on the load, but the times do.
+Planning time includes attaching the starts and goals with the critics; the median of the
+solver's share (after the attachment) and the median CPU time of the whole call (this process's
+time, one thread: about what an idle core takes, on a loaded machine) are printed beside it. The
+machine's load average is printed first: every solver call is budgeted in expansions (the
+planner's default ``expansion_limit``), so the statuses and costs do not depend on the load, but
+the times do.
 
 Run: ``python examples/bench_buffer_planner.py [--nodes 1000] [--agents 20 100 200 max] [--problems 20]
 [--solvers auto ecbs]``
@@ -106,17 +109,22 @@ def main() -> None:
         for name in args.solvers:
             planner = setup.planner.with_options(time_limit=args.time_limit, fallback_suboptimality=None,
                                                  **SOLVER_OPTIONS[name])
-            times, status = [], collections.Counter()
+            times, cpu, solver_times, status = [], [], [], collections.Counter()
             socs[name] = []
             for p in problems:
+                c0 = time.process_time()
                 plan = planner.plan(setup.observations[p.start_nodes], setup.observations[p.goal_nodes])
+                cpu.append(time.process_time() - c0)
                 times.append(plan.planning_time)
+                solver_times.append(plan.cbs.stats.runtime_s if plan.cbs is not None else np.nan)
                 status[plan.status] += 1
                 socs[name].append(plan.soc if plan.solved else np.nan)
             solved = np.array(socs[name], dtype=float)
             soc = f"median SOC {np.nanmedian(solved):.0f}" if np.isfinite(solved).any() else "no plan"
             print(f"{name}, {k} agents, {args.difficulty}: median {np.median(times):.2f} s, "
-                  f"worst {max(times):.2f} s (limit {args.time_limit:g} s), {dict(status)}, {soc}", flush=True)
+                  f"worst {max(times):.2f} s (limit {args.time_limit:g} s; solver median "
+                  f"{np.nanmedian(solver_times):.2f} s; CPU median {np.median(cpu):.2f} s, worst {max(cpu):.2f} s), "
+                  f"{dict(status)}, {soc}", flush=True)
         if "ecbs" in socs:
             ref = np.array(socs["ecbs"], dtype=float)
             for name, vals in socs.items():

@@ -366,3 +366,57 @@ def test_evaluate_command_writes_the_failure_anatomy_and_takes_hold_and_repairs(
     assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--hold", "waits",
                  "--out", str(tmp_path / "p")]) == 2
     assert "--hold does not apply" in capsys.readouterr().err
+
+
+def test_mapf_metrics_hand_computed():
+    from baselines.evaluation import mapf_metrics
+
+    # three agents arrive at steps 4, 9, 7: all arrived, makespan the last arrival
+    assert mapf_metrics(np.array([4, 9, 7]), 9) == {"isr": 1.0, "soc": 20, "makespan": 9}
+    # one agent never arrives in a run of 300 steps: it counts the run's length
+    m = mapf_metrics(np.array([4, -1, 7, 5]), 300)
+    assert m == {"isr": 0.75, "soc": 316, "makespan": 300}
+    with pytest.raises(ValueError, match="arrival"):
+        mapf_metrics(np.array([], dtype=int), 3)
+    rows = [{"method": "m", "agents": 4, "difficulty": "hard", "success": s, "cost_max": 1.0, "cost_mean": 1.0,
+             "collisions": 0, "steps": st, "planning_time": 0.0, **mapf_metrics(np.array(a), st)}
+            for s, a, st in ((True, [3, 4, 5, 6], 6), (False, [4, -1, 7, 5], 300))]
+    agg = aggregate(rows)[0]
+    assert agg["csr"] == 0.5 and agg["isr"] == pytest.approx(0.875)
+    assert agg["soc_mean"] == pytest.approx((18 + 316) / 2) and agg["makespan_mean"] == pytest.approx(153)
+    # rows without the metrics (e.g. the paper protocol's) aggregate to nan, not to a wrong mean
+    assert math.isnan(aggregate([{k: v for k, v in rows[0].items() if k != "soc"}])[0]["soc_mean"])
+
+
+def test_many_agents_curve_reads_evaluate_rows(tmp_path, monkeypatch, capsys):
+    """examples/many_agents_curve.py on hand-made rows: the table's CSR, ISR and per-agent sum of
+    costs, and the figure; folders without the metrics are refused with a message."""
+    import csv
+    import runpy
+    import sys
+
+    from baselines.evaluation import mapf_metrics
+
+    folder = tmp_path / "grid"
+    folder.mkdir()
+    rows = []
+    for i, (arrival, steps) in enumerate((([5, 9], 9), ([6, -1], 300))):
+        rows.append({"method": "ours", "agents": 2, "difficulty": "hard", "problem": i, "success": -1 not in arrival,
+                     "cost_max": 2.0 * (i + 1), "cost_mean": 1.0, "collisions": i, "steps": steps,
+                     "planning_time": 0.1, **mapf_metrics(np.array(arrival), steps)})
+    with open(folder / "runs.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    monkeypatch.setattr(sys, "argv", ["many_agents_curve.py", str(folder), "--out", str(tmp_path / "c.png")])
+    runpy.run_path("examples/many_agents_curve.py", run_name="__main__")
+    out = capsys.readouterr().out
+    # CSR 1 of 2 runs; ISR (1 + 0.5) / 2; sum of costs (14 + 306) / 2 over 2 agents; makespan (9 + 300) / 2
+    assert "| 2 | 2 | 50% | 75.0% | 80.0 | 154 | 3.0 | 0.5 | 0.10 s |" in out
+    assert (tmp_path / "c.png").stat().st_size > 0
+    with open(folder / "runs.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["method", "agents"])
+        w.writeheader()
+        w.writerow({"method": "ours", "agents": 2})
+    with pytest.raises(SystemExit, match="no isr"):
+        runpy.run_path("examples/many_agents_curve.py", run_name="__main__")

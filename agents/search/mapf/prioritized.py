@@ -13,7 +13,9 @@ instance gives the same plan on any machine.
 
 The budget is counted in work: SIPP expansions over all agents and restarts
 (``expansion_limit``); the wall-clock ``time_limit`` is only a safety net. Reaching either
-returns status ``"timeout"`` (the message says which).
+returns status ``"timeout"`` (the message says which). Prioritised planning proves nothing
+where it fails, so a small impossible part of the instance is first looked for by the
+exhaustive joint check, as CBS does (``joint_check_states``).
 """
 from __future__ import annotations
 
@@ -22,9 +24,11 @@ import heapq
 import time as _time
 from typing import List, Optional, Sequence, Set, Tuple
 
+from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
 from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
+from .solver import DEFAULT_JOINT_CHECK_STATES
 
 #: default SIPP expansions of one solve, over all agents and restarts
 DEFAULT_EXPANSION_LIMIT = 2_000_000
@@ -135,7 +139,8 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
                       expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
                       time_limit: Optional[float] = None,
                       order: Optional[Sequence[int]] = None,
-                      start_hold: Optional[int] = None) -> CBSResult:
+                      start_hold: Optional[int] = None,
+                      joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
     """Prioritised planning with SIPP and priority restarts; a :class:`CBSResult`.
 
     Args:
@@ -147,11 +152,17 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         start_hold: steps ``0 .. start_hold`` for which an agent not planned yet keeps its start
             against an agent that must park at or near it (see :func:`plan_in_order`); default
             ``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration.
+        joint_check_states: before planning, each connected part of the graph whose agents'
+            joint configurations number at most this many is searched exhaustively
+            (:func:`~agents.search.mapf.feasibility.infeasible_component`), as CBS does, so
+            that an impossible small part is reported ``infeasible`` at once instead of
+            spending the budget (0: no check).
 
     Returns:
         status ``"suboptimal"`` with paths (their sum of costs is not bounded), ``"timeout"``
         (budget, time or restarts used up; the message says which), or ``"infeasible"`` when
-        some agent's goal cannot be reached from its start even alone.
+        some agent's goal cannot be reached from its start even alone, or the joint check
+        proves that no plan exists.
     """
     if start_hold is None:
         data = inst.durations.data
@@ -164,6 +175,8 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         raise ValueError(f"expansion_limit must be >= 1 or None, got {expansion_limit!r}")
     if time_limit is not None and not time_limit > 0:
         raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
+    if joint_check_states < 0:
+        raise ValueError(f"joint_check_states must be >= 0, got {joint_check_states!r}")
     t0 = _time.perf_counter()
     stats = CBSStats()
     counter = [0]
@@ -179,6 +192,10 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
     for i in range(k):
         if inst.h[i][inst.starts[i]] >= UNREACHABLE:
             return finish(CBSResult("infeasible", message=f"agent {i} cannot reach its goal from its start"))
+    if joint_check_states > 0:
+        reason = infeasible_component(inst, joint_check_states)
+        if reason is not None:
+            return finish(CBSResult("infeasible", message=reason))
     cur = list(order) if order is not None else initial_order(inst)
     if sorted(cur) != list(range(k)):
         raise ValueError(f"order must be a permutation of the {k} agents")

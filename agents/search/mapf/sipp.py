@@ -127,14 +127,6 @@ class IntervalTable:
             self._starts[node] = [a for a, _ in s]
         return s
 
-    def interval_starts(self, node: int) -> List[int]:
-        """First times of :meth:`safe`'s intervals (for bisection)."""
-        if self._safe[node] is None:
-            self.safe(node)
-        starts = self._starts[node]
-        assert starts is not None
-        return starts
-
 
 class BudgetExceeded(Exception):
     """Raised by :func:`sipp` when its expansion budget runs out."""
@@ -156,7 +148,7 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
         return None
     safe = table.safe
     cache = table._safe
-    starts_of = table.interval_starts
+    starts_cache = table._starts  # set together with ``cache`` by ``safe``
     unit = table.unit
     moves = table.moves
     out = table.out
@@ -203,10 +195,14 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
                 continue
             lead = d if unit else 0  # v must be free from t + lead to t + d
             # first interval of v that could contain t + lead for some t >= t_u
-            j = bisect_right(starts_of(v), t_u + lead) - 1
-            if j < 0:
+            n_int = len(v_int)
+            if n_int == 1:
                 j = 0
-            for jv in range(j, len(v_int)):
+            else:
+                j = bisect_right(starts_cache[v], t_u + lead) - 1  # type: ignore[arg-type]
+                if j < 0:
+                    j = 0
+            for jv in range(j, n_int):
                 a_v, b_v = v_int[jv]
                 if a_v - lead > t_hi:
                     break
