@@ -41,6 +41,7 @@ COMMAND_MODULES = (
     "baselines.commands.bench_env",
     "baselines.commands.mapf",
     "baselines.commands.train",
+    "baselines.commands.train_marl",
     "baselines.commands.evaluate",
 )
 

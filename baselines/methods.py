@@ -10,6 +10,8 @@ method                    policy          plan
 ``constrained_policy``    constrained     none: straight to the goal
 ``ours``                  constrained     CBS on the distance- and cost-pruned graph (the paper)
 ``ours_budget``           constrained     as ``ours``, routes first bounded by a risk budget
+``ippo``                  IPPO (MARL)     none: the multi-agent RL policy alone (opt-in)
+``mappo_lag``             MAPPO-Lag       none: the multi-agent RL policy alone (opt-in)
 ========================  ==============  =====================================================
 
 The buffer graph is annotated by the *unconstrained* agent's critics (as in the paper);
@@ -79,8 +81,16 @@ METHODS: Dict[str, Method] = {
         Method("ours", "Constrained Search (Ours, CBS)", "constrained", True, c_max=DEFAULT_C_MAX),
         Method("ours_budget", "Constrained Search + Risk Budget", "constrained", True, c_max=DEFAULT_C_MAX,
                budget=DEFAULT_BUDGET),
+        # the multi-agent RL baselines (baselines.marl_rows): their policy is the model of the same name
+        Method("ippo", "IPPO (MARL)", "ippo", False),
+        Method("mappo_lag", "MAPPO-Lagrangian (MARL)", "mappo_lag", False),
     )
 }
+
+#: the methods that run their own multi-agent RL policy (``safe-mapf train-marl``)
+MARL_METHODS = ("ippo", "mappo_lag")
+#: what ``safe-mapf evaluate`` runs without ``--methods``: every method but the MARL ones
+DEFAULT_METHODS = tuple(m for m in METHODS if m not in MARL_METHODS)
 
 #: the four methods of the paper's Table I
 PAPER_METHODS = ("unconstrained_policy", "sorb", "constrained_policy", "ours")
@@ -145,6 +155,10 @@ def execute(
     ``memory`` is the search's :class:`~agents.search.repair.EdgeMemory` (default: a new one,
     returned in ``extra["memory"]`` with what this run taught it).
     """
+    if method.policy in MARL_METHODS:
+        from .marl_rows import execute_marl
+
+        return execute_marl(env, models[method.policy], starts, goals, seed=seed)
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
     planner_m = None
@@ -216,5 +230,6 @@ def _geodesic(env) -> Any:
     return geodesic
 
 
-__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "Execution", "METHODS", "Method", "PAPER_METHODS",
+__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "Execution", "MARL_METHODS", "METHODS", "Method",
+           "PAPER_METHODS",
            "distance_fn", "execute", "get_methods", "policy_fn"]
