@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional
 
 import numpy as np
+from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from .config import MarlConfig
 
@@ -20,12 +21,51 @@ SUFFIX = {"ippo": ".zip", "mappo-lag": ".pt"}
 Act = Callable[[np.ndarray], np.ndarray]
 
 
-def make_env(env_id: str, n_agents: int, max_cycles: int, **kwargs: Any):
-    """The parallel env with flat observations (``[position, goal]`` per agent, normalised)."""
+def make_env(env_id: str, n_agents: int, max_cycles: int, shaping: float = 0.0, gamma: float = 0.99,
+             **kwargs: Any):
+    """The parallel env with flat observations (``[position, goal]`` per agent, normalised); with
+    ``shaping > 0`` its rewards carry :class:`PotentialShaping`."""
     import safe_mapf_envs
 
-    return safe_mapf_envs.parallel_env(env_id, n_agents=n_agents, max_cycles=max_cycles,
-                                       observation_format="flat", **kwargs)
+    env = safe_mapf_envs.parallel_env(env_id, n_agents=n_agents, max_cycles=max_cycles,
+                                      observation_format="flat", **kwargs)
+    return PotentialShaping(env, shaping, gamma) if shaping > 0 else env
+
+
+class PotentialShaping(BaseParallelWrapper):
+    """Potential-based reward shaping (Ng, Harada and Russell, 1999) from the agent's own observation.
+
+    ``r += weight * (gamma * phi(o') - phi(o))`` with ``phi(o) = -|goal - position|`` in steps of
+    full speed (straight-line distance, read from the flat observation; ``phi = 0`` once the agent
+    arrived). Shaping of this form leaves the optimal policies unchanged; it gives PPO a signal
+    on maps where random motion rarely reaches a goal (``SafeCentralObstacle-v0``: 55 x 55 units,
+    goals reached within 1). Costs are untouched.
+    """
+
+    def __init__(self, env, weight: float, gamma: float) -> None:
+        super().__init__(env)
+        self.weight, self.gamma = float(weight), float(gamma)
+        base = env.unwrapped
+        self._scale = np.asarray(base.scenario.size, dtype=np.float64) / float(getattr(base, "action_scale", 1.0))
+        self._phi: Dict[str, float] = {}
+
+    def _potential(self, obs: np.ndarray) -> float:
+        o = np.asarray(obs, dtype=np.float64)
+        return -float(np.hypot(*((o[2:4] - o[0:2]) * self._scale)))
+
+    def reset(self, seed: Optional[int] = None, options: Optional[dict] = None):
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self._phi = {a: self._potential(o) for a, o in obs.items()}
+        return obs, infos
+
+    def step(self, actions):
+        obs, rewards, terms, truncs, infos = self.env.step(actions)
+        rewards = dict(rewards)
+        for a in rewards:
+            new = 0.0 if terms[a] else self._potential(obs[a])
+            rewards[a] += self.weight * (self.gamma * new - self._phi[a])
+            self._phi[a] = new
+        return obs, rewards, terms, truncs, infos
 
 
 def flat_observations(observations: Mapping[str, Any], names: List[str]) -> np.ndarray:
@@ -39,13 +79,13 @@ def flat_observations(observations: Mapping[str, Any], names: List[str]) -> np.n
 
 
 def evaluate_policy(act: Act, env_id: str, n_agents: int, max_cycles: int, episodes: int,
-                    seed: int) -> Dict[str, float]:
+                    seed: int, **env_kwargs: Any) -> Dict[str, float]:
     """Held-out episodes (seeds ``seed``, ``seed + 1``, ...) with deterministic actions.
 
     Returns the share of episodes in which every agent arrived (``success_rate``), the share of
     agents that arrived (``arrival_rate``), an agent's mean episode cost and the mean episode length.
     """
-    env = make_env(env_id, n_agents, max_cycles)
+    env = make_env(env_id, n_agents, max_cycles, **env_kwargs)
     success, arrived, costs, steps = [], [], [], []
     for ep in range(episodes):
         obs, _ = env.reset(seed=seed + ep)
@@ -131,7 +171,8 @@ class RunFolder:
     def evaluate(self, act: Act, steps: int, extra: Optional[Dict[str, float]] = None) -> Dict[str, float]:
         """Run the held-out evaluation, log it (file, TensorBoard) and return it."""
         cfg = self.cfg
-        ev = evaluate_policy(act, cfg.env_id, cfg.n_agents, cfg.max_cycles, cfg.eval_episodes, cfg.eval_seed)
+        ev = evaluate_policy(act, cfg.env_id, cfg.n_agents, cfg.max_cycles, cfg.eval_episodes, cfg.eval_seed,
+                             **cfg.env_kwargs(training=False))
         line = {"timesteps": steps, "wall_s": round(self.wall(), 1), **ev, **(extra or {})}
         with open(self.out / "evaluations.jsonl", "a") as f:
             f.write(json.dumps(line) + "\n")

@@ -21,7 +21,7 @@ def make_vec_env(cfg: MarlConfig):
     """SuperSuit's SB3 vector env over ``cfg.n_envs`` copies of the ``cfg.n_agents``-agent env."""
     import supersuit as ss
 
-    par = make_env(cfg.env_id, cfg.n_agents, cfg.max_cycles)
+    par = make_env(cfg.env_id, cfg.n_agents, cfg.max_cycles, **cfg.env_kwargs())
     return ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(ss.black_death_v3(par)), cfg.n_envs,
                                  num_cpus=0, base_class="stable_baselines3")
 

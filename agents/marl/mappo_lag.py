@@ -6,7 +6,8 @@ the reward critic and the cost critic see the global state (every agent's positi
 the env's :meth:`state`) with the agent's own observation appended (training only). The policy
 loss is PPO's clipped surrogate on ``(A_r - lambda A_c) / (1 + lambda)``; after every rollout
 ``lambda <- max(0, lambda + lr (J_c - d))`` with ``J_c`` an agent's mean episode cost over
-the episodes that ended in the rollout and ``d`` the cost limit.
+the episodes that ended in the rollout and ``d`` the cost limit (once ``lagrange_start`` agent
+steps are done: a multiplier that grows before the agents can arrive teaches them to stand still).
 
 Agents that reach their goal leave the env (parked there); their later slots are masked out
 of every loss (the exact form of black death). Truncated agents bootstrap from the critics.
@@ -59,7 +60,7 @@ class _Envs:
     """``n_envs`` env copies stepped together; arrays are ``(n_envs, n_agents, ...)``."""
 
     def __init__(self, cfg: MarlConfig, rng: np.random.Generator) -> None:
-        self.envs = [make_env(cfg.env_id, cfg.n_agents, cfg.max_cycles) for _ in range(cfg.n_envs)]
+        self.envs = [make_env(cfg.env_id, cfg.n_agents, cfg.max_cycles, **cfg.env_kwargs()) for _ in range(cfg.n_envs)]
         self.n, self.rng = cfg.n_agents, rng
         env0 = self.envs[0]
         self.obs_dim = int(env0.observation_space(env0.possible_agents[0]).shape[0])
@@ -204,7 +205,8 @@ def train_mappo_lag(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
         episodes = envs.take()
         if episodes:
             j_c = float(np.mean([ep["cost"] for ep in episodes]))
-            lagrange = max(0.0, lagrange + cfg.lagrange_lr * (j_c - cfg.cost_limit))
+            if steps > cfg.lagrange_start:
+                lagrange = max(0.0, lagrange + cfg.lagrange_lr * (j_c - cfg.cost_limit))
             stats.update(episode_cost=j_c, episode_success=float(np.mean([ep["success"] for ep in episodes])),
                          episode_arrival=float(np.mean([ep["arrival"] for ep in episodes])))
         stats["lagrange"] = lagrange
@@ -230,8 +232,9 @@ def train_mappo_lag(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
 def _update(nets: MappoNets, opt: torch.optim.Optimizer, obs, crit, act, logp_old, adv, ret, *, lagrange: float,
             cfg: MarlConfig, rng: np.random.Generator) -> Dict[str, float]:
     """PPO epochs over one rollout's live agent steps; returns mean losses."""
+    # both advantages standardised (as OmniSafe's PPO-Lag does), so lambda weighs like against like
     adv_r = (adv[:, 0] - adv[:, 0].mean()) / (adv[:, 0].std() + 1e-8)
-    adv_c = adv[:, 1] - adv[:, 1].mean()
+    adv_c = (adv[:, 1] - adv[:, 1].mean()) / (adv[:, 1].std() + 1e-8)
     mixed = (adv_r - lagrange * adv_c) / (1.0 + lagrange)
     n = len(obs)
     losses: Dict[str, List[float]] = {"policy_loss": [], "value_loss": [], "cost_value_loss": [], "entropy": []}

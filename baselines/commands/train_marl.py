@@ -34,6 +34,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue the run in --out from its last resume point, up to --timesteps agent steps in all")
     g = p.add_argument_group("learning")
     g.add_argument("--max-cycles", type=_int, default=d.max_cycles, help="steps per training episode")
+    g.add_argument("--goal-distance", type=float, nargs=2, metavar=("LO", "HI"), default=None,
+                   help="geodesic start-goal distance band of the training episodes (default: goals anywhere)")
+    g.add_argument("--shaping", type=float, default=d.shaping,
+                   help="weight of potential-based shaping by the straight-line distance to the goal, read from "
+                        "each agent's observation (0: the env's -1 per step alone)")
     g.add_argument("--n-envs", type=_int, default=d.n_envs, help="environment copies per rollout")
     g.add_argument("--n-steps", type=_int, default=d.n_steps, help="steps per copy per rollout")
     g.add_argument("--batch-size", type=_int, default=d.batch_size)
@@ -48,6 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--cost-limit", type=float, default=d.cost_limit, help="limit of an agent's episode cost")
     g.add_argument("--lagrange-lr", type=float, default=d.lagrange_lr)
     g.add_argument("--lagrange-init", type=float, default=d.lagrange_init)
+    g.add_argument("--lagrange-start", type=_int, default=d.lagrange_start,
+                   help="agent steps before the multiplier starts to move")
     g = p.add_argument_group("evaluation and output")
     g.add_argument("--eval-freq", type=_int, default=d.eval_freq,
                    help="agent steps between evaluations and resume points (0: only at the end)")

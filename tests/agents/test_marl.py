@@ -88,3 +88,31 @@ def test_gae_stops_at_the_end_of_an_agent_episode():
     # with gamma = lambda = 1 the return is the sum of rewards to the episode's end (plus the bootstrap)
     assert np.allclose(ret.ravel(), [-2.0, -1.0, 0.0, -3.5])
     assert np.allclose(adv, ret - val)
+
+
+def test_the_multiplier_waits_for_lagrange_start_then_moves_with_the_cost(tmp_path):
+    cfg = dict(TINY, algo="mappo-lag", eval_freq=0, lagrange_lr=1.0, lagrange_init=0.5, cost_limit=0.0)
+    held = train_marl(MarlConfig(**dict(cfg, out_dir=str(tmp_path / "a"), lagrange_start=10**6)))
+    assert held["lagrange_multiplier"] == 0.5
+    # a cost limit of 0: any cost above it raises the multiplier
+    moved = train_marl(MarlConfig(**dict(cfg, out_dir=str(tmp_path / "b"))))
+    assert moved["lagrange_multiplier"] > 0.5
+
+
+def test_potential_shaping_adds_the_distance_covered():
+    from agents.marl.common import make_env
+
+    raw = make_env("SafeCenterDot-v0", 1, 20)
+    shaped = make_env("SafeCenterDot-v0", 1, 20, shaping=1.0, gamma=1.0)
+    options = {"starts": [(2.0, 2.0)], "goals": [(2.0, 7.5)]}
+    totals = []
+    for env in (raw, shaped):
+        env.reset(seed=0, options=options)
+        total = 0.0
+        while env.agents:
+            _, r, _, _, _ = env.step({"agent_0": np.array([0.0, 1.0])})
+            total += r["agent_0"]
+        totals.append(total)
+    # with gamma = 1 the shaping telescopes to phi(goal) - phi(start) = the start's distance, 5.5 steps
+    assert totals[0] < 0 and np.isclose(totals[1] - totals[0], 5.5)
+    assert shaped.state().shape == (4,) and shaped.agent_name_mapping == {"agent_0": 0}
