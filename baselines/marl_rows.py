@@ -35,7 +35,7 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
     ``count_start_cost``: add the start state's cost of a lone agent (the paper protocol's convention).
     """
     from .anatomy import FailureTracker
-    from .methods import Execution, _geodesic
+    from .methods import Execution, _geodesic, tally_step
 
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -56,13 +56,7 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
         steps += 1
         traj.append(env.positions)
         tracker.step({}, infos, env.agents)
-        now = set()
-        for a, info in infos.items():
-            i = index[a]
-            cost[i] += float(info.get("obstacle_cost", info["cost"]))
-            now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
-            if term.get(a, False):
-                reached[i], parked_at[i] = True, steps
+        now = tally_step(infos, term, index, cost, reached, parked_at, steps)
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
     trajectories = np.stack(traj)

@@ -187,14 +187,7 @@ def execute(
         steps += 1
         traj.append(env.positions)
         tracker.step(policy.stats.holding, infos, env.agents)
-        now = set()
-        for a, info in infos.items():
-            i = index[a]
-            cost[i] += float(info.get("obstacle_cost", info["cost"]))
-            now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
-            if term.get(a, False):
-                reached[i] = True
-                parked_at[i] = steps
+        now = tally_step(infos, term, index, cost, reached, parked_at, steps)
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
     plan = policy.current_plan
@@ -216,6 +209,21 @@ def execute(
             escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
                      plan.status if plan is not None else "direct", trajectories, extra, failures)
+
+
+def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
+               steps: int) -> set:
+    """Add one step's obstacle costs and arrivals (at step ``steps``) to the per-agent arrays; returns
+    the contacts under way, as pairs of agent names."""
+    now: set = set()
+    for a, info in infos.items():
+        i = index[a]
+        cost[i] += float(info.get("obstacle_cost", info["cost"]))
+        now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
+        if term.get(a, False):
+            reached[i] = True
+            parked_at[i] = steps
+    return now
 
 
 def _geodesic(env) -> Any:
