@@ -9,7 +9,7 @@ import pytest
 import safe_mapf_envs
 from agents.marl import load_marl_pretrained, pretrained_marl_path
 
-SHIPPED = [(env, algo) for env in ("SafeCenterDot-v0",) for algo in ("ippo", "mappo-lag")]
+SHIPPED = [(env, algo) for env in ("SafeCenterDot-v0", "SafeCentralObstacle-v0") for algo in ("ippo", "mappo-lag")]
 
 
 @pytest.mark.parametrize("env_id,algo", SHIPPED)
