@@ -120,22 +120,11 @@ class RunFolder:
 
     def __init__(self, cfg: MarlConfig, command: Optional[List[str]] = None) -> None:
         self.cfg = cfg
-        self.out = Path(cfg.out_dir or os.path.join("runs", f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"))
+        self.out = self.folder(cfg)
         self.suffix = SUFFIX[cfg.algo]
         self.command = command
-        self.start_steps = 0
-        self.state: Dict[str, Any] = {}
-        if cfg.resume:
-            meta = self.out / "checkpoint.json"
-            if not meta.exists():
-                raise ValueError(f"--resume: {self.out} has no resume point (checkpoint.json); start without --resume")
-            self.state = json.loads(meta.read_text())
-            if self.state.get("algo") != cfg.algo or self.state.get("env_id") != cfg.env_id:
-                raise ValueError(f"--resume: {self.out} holds a {self.state.get('algo')} run on "
-                                 f"{self.state.get('env_id')}, not {cfg.algo} on {cfg.env_id}")
-            self.start_steps = int(self.state["timesteps"])
-        elif (self.out / "checkpoint.json").exists():
-            raise ValueError(f"{self.out} already holds a run: pass --resume to continue it, or another --out")
+        self.state = self.check(cfg)
+        self.start_steps = int(self.state.get("timesteps", 0))
         self.out.mkdir(parents=True, exist_ok=True)
         self.t0 = time.perf_counter()
         self.cpu0 = time.process_time()
@@ -149,6 +138,29 @@ class RunFolder:
         (self.out / "config.json").write_text(json.dumps(
             {"config": asdict(self.cfg), "command": command, "python": platform.python_version(),
              "versions": _versions()}, indent=1))
+
+    @staticmethod
+    def folder(cfg: MarlConfig) -> Path:
+        """The run's output folder (default ``runs/<env>-<algo>-s<seed>``)."""
+        return Path(cfg.out_dir or os.path.join("runs", f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"))
+
+    @classmethod
+    def check(cls, cfg: MarlConfig) -> Dict[str, Any]:
+        """The resume point's description with ``cfg.resume`` (``{}`` without); ``ValueError`` if there is
+        none to resume, if it belongs to another run, or if a fresh run would overwrite one."""
+        out = cls.folder(cfg)
+        meta = out / "checkpoint.json"
+        if not cfg.resume:
+            if meta.exists():
+                raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another --out")
+            return {}
+        if not meta.exists():
+            raise ValueError(f"--resume: {out} has no resume point (checkpoint.json); start without --resume")
+        state = json.loads(meta.read_text())
+        if state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
+            raise ValueError(f"--resume: {out} holds a {state.get('algo')} run on {state.get('env_id')}, "
+                             f"not {cfg.algo} on {cfg.env_id}")
+        return state
 
     @property
     def checkpoint(self) -> Path:

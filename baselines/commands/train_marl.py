@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from agents.marl import MarlConfig, train_marl
-    from agents.marl.common import print_line
+    from agents.marl.common import RunFolder, print_line
     from baselines.cli import MissingExtraError, show_progress
 
     names = {f.name for f in dataclasses.fields(MarlConfig)}
@@ -100,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
             import supersuit  # noqa: F401
         except ImportError:
             raise MissingExtraError("--algo ippo needs SuperSuit: pip install \"safe-mapf[marl]\"") from None
+    for cfg in cfgs:  # every run's folder, before the first run starts
+        RunFolder.check(cfg)
     command = ["safe-mapf", *sys.argv[1:]] if sys.argv else None
     for cfg in cfgs:
         summary = train_marl(cfg, command=command)

@@ -44,3 +44,12 @@ def test_train_marl_rejects_a_non_integer(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["train-marl", "--timesteps", "lots"])
     assert exc.value.code == 2 and "expected an integer, got 'lots'" in capsys.readouterr().err
+
+
+def test_train_marl_checks_every_seed_folder_before_the_first_run(tmp_path, capsys):
+    base = tmp_path / "many"
+    (base / "s2").mkdir(parents=True)
+    (base / "s2" / "checkpoint.json").write_text("{}")  # seed 2's folder already holds a run
+    assert main(["train-marl", *TINY, "--seeds", "1", "2", "--out", str(base)]) == 2
+    assert "already holds a run" in capsys.readouterr().err
+    assert not (base / "s1").exists()
