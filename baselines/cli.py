@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "baselines.commands.bench_env",
     "baselines.commands.mapf",
     "baselines.commands.train",
+    "baselines.commands.train_marl",
     "baselines.commands.evaluate",
 )
 

@@ -10,6 +10,8 @@ method                    policy          plan
 ``constrained_policy``    constrained     none: straight to the goal
 ``ours``                  constrained     CBS on the distance- and cost-pruned graph (the paper)
 ``ours_budget``           constrained     as ``ours``, routes first bounded by a risk budget
+``ippo``                  IPPO (MARL)     none: the multi-agent RL policy alone (opt-in)
+``mappo_lag``             MAPPO-Lag       none: the multi-agent RL policy alone (opt-in)
 ========================  ==============  =====================================================
 
 The buffer graph is annotated by the *unconstrained* agent's critics (as in the paper);
@@ -79,8 +81,16 @@ METHODS: Dict[str, Method] = {
         Method("ours", "Constrained Search (Ours, CBS)", "constrained", True, c_max=DEFAULT_C_MAX),
         Method("ours_budget", "Constrained Search + Risk Budget", "constrained", True, c_max=DEFAULT_C_MAX,
                budget=DEFAULT_BUDGET),
+        # the multi-agent RL baselines (baselines.marl_rows): their policy is the model of the same name
+        Method("ippo", "IPPO (MARL)", "ippo", False),
+        Method("mappo_lag", "MAPPO-Lagrangian (MARL)", "mappo_lag", False),
     )
 }
+
+#: the methods that run their own multi-agent RL policy (``safe-mapf train-marl``)
+MARL_METHODS = ("ippo", "mappo_lag")
+#: what ``safe-mapf evaluate`` runs without ``--methods``: every method but the MARL ones
+DEFAULT_METHODS = tuple(m for m in METHODS if m not in MARL_METHODS)
 
 #: the four methods of the paper's Table I
 PAPER_METHODS = ("unconstrained_policy", "sorb", "constrained_policy", "ours")
@@ -147,6 +157,10 @@ def execute(
     ``memory`` is the search's :class:`~agents.search.repair.EdgeMemory` (default: a new one,
     returned in ``extra["memory"]`` with what this run taught it).
     """
+    if method.policy in MARL_METHODS:
+        from .marl_rows import execute_marl
+
+        return execute_marl(env, models[method.policy], starts, goals, seed=seed)
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
     planner_m = None
@@ -175,14 +189,7 @@ def execute(
         steps += 1
         traj.append(env.positions)
         tracker.step(policy.stats.holding, infos, env.agents)
-        now = set()
-        for a, info in infos.items():
-            i = index[a]
-            cost[i] += float(info.get("obstacle_cost", info["cost"]))
-            now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
-            if term.get(a, False):
-                reached[i] = True
-                parked_at[i] = steps
+        now = tally_step(infos, term, index, cost, reached, parked_at, steps)
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
     plan = policy.current_plan
@@ -206,6 +213,21 @@ def execute(
                      plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at)
 
 
+def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
+               steps: int) -> set:
+    """Add one step's obstacle costs and arrivals (at step ``steps``) to the per-agent arrays; returns
+    the contacts under way, as pairs of agent names."""
+    now: set = set()
+    for a, info in infos.items():
+        i = index[a]
+        cost[i] += float(info.get("obstacle_cost", info["cost"]))
+        now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
+        if term.get(a, False):
+            reached[i] = True
+            parked_at[i] = steps
+    return now
+
+
 def _geodesic(env) -> Any:
     """``geodesic(a, b) -> float`` on ``env``'s map (ground truth; ``nan`` where a point is not free)."""
 
@@ -218,5 +240,6 @@ def _geodesic(env) -> Any:
     return geodesic
 
 
-__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "Execution", "METHODS", "Method", "PAPER_METHODS",
+__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "Execution", "MARL_METHODS", "METHODS", "Method",
+           "PAPER_METHODS",
            "distance_fn", "execute", "get_methods", "policy_fn"]

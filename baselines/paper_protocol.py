@@ -45,7 +45,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from .evaluation import DIFFICULTIES, Problem
-from .methods import Method
+from .methods import MARL_METHODS, Method
 
 #: the published code's c_max grid, as factors of the trained cost limit
 PAPER_C_MAX_FACTORS = (0.1, 0.25, 0.5, 0.75, 1.0)
@@ -254,6 +254,13 @@ def execute_paper(env, setup: PaperSetup, method: Method, problem: Problem, seed
     """Run ``method`` on ``problem`` in ``env`` (a parallel env with ``agent_collisions=False``)."""
     from .methods import distance_fn, policy_fn
 
+    if method.policy in MARL_METHODS:  # the MARL policy alone, cost counted as below
+        from .marl_rows import execute_marl
+
+        ex = execute_marl(env, setup.models[method.policy], problem.starts, problem.goals, seed=seed,
+                          count_start_cost=True)
+        return PaperExecution(ex.success, ex.reached, ex.cost, ex.steps, "direct", [0] * len(ex.reached),
+                              ex.trajectories)
     model = setup.models[method.policy]
     act, dist = policy_fn(model), distance_fn(model)
     obs, infos = env.reset(seed=seed, options={"starts": problem.starts, "goals": problem.goals})
@@ -325,7 +332,7 @@ def evaluate_paper(
     """
     import safe_mapf_envs
 
-    unknown = [m.name for m in methods if m.name not in PAPER_PROTOCOL_METHODS]
+    unknown = [m.name for m in methods if m.name not in PAPER_PROTOCOL_METHODS + MARL_METHODS]
     if unknown:
         raise ValueError(f"the paper's protocol defines {', '.join(PAPER_PROTOCOL_METHODS)}; not {unknown}")
     grid = setup.c_max_grid(factors)

@@ -10,7 +10,7 @@ import time
 
 def register(sub: argparse._SubParsersAction) -> None:
     from baselines.evaluation import DIFFICULTIES
-    from baselines.methods import METHODS, PAPER_METHODS
+    from baselines.methods import DEFAULT_METHODS, MARL_METHODS, METHODS, PAPER_METHODS
 
     p = sub.add_parser("evaluate", help="compare the methods on the same problems (Tables I and II, Figure 1)",
                        description=run.__doc__)
@@ -26,7 +26,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--difficulty", nargs="+", choices=list(DIFFICULTIES), default=list(DIFFICULTIES),
                    help="difficulties to run")
     p.add_argument("--methods", nargs="+", choices=list(METHODS), default=None,
-                   help=f"default: all (--protocol paper: the paper's four, {', '.join(PAPER_METHODS)})")
+                   help=f"default: {', '.join(DEFAULT_METHODS)} (--protocol paper: the paper's four, "
+                        f"{', '.join(PAPER_METHODS)}); the multi-agent RL baselines {', '.join(MARL_METHODS)} "
+                        "(no search) run when named, in both protocols")
+    p.add_argument("--ippo", default=None, metavar="PATH",
+                   help="IPPO policy of the ippo method (default: the shipped one for --env; see train-marl)")
+    p.add_argument("--mappo-lag", dest="mappo_lag", default=None, metavar="PATH",
+                   help="MAPPO-Lagrangian policy of the mappo_lag method (default: the shipped one for --env)")
     p.add_argument("--seed", type=_non_negative, default=0, help="seed of the graph nodes and the problems")
     p.add_argument("--nodes", type=_positive, default=1000, help="buffer graph nodes (default 1000)")
     p.add_argument("--c-max", type=_c_max, default=None,
@@ -197,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
         select_c_max,
         write_csv,
     )
-    from baselines.methods import METHODS, get_methods
+    from baselines.methods import DEFAULT_METHODS, get_methods
     from baselines.output import RowWriter
 
     repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
@@ -222,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
     if args.protocol == "paper":
         return _run_paper(args)
     if args.c_max == "auto" and args.c_max_from is None and not any(
-            m.search and math.isfinite(m.c_max) for m in get_methods(dict.fromkeys(args.methods or METHODS))):
+            m.search and math.isfinite(m.c_max) for m in get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))):
         raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
     chosen, validation_seed = None, None
     if args.c_max_from is not None:
@@ -239,7 +245,8 @@ def run(args: argparse.Namespace) -> int:
         validation_seed = meta.get("validation_seed")
     out = _check_before_work(args)
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)
-    methods = get_methods(dict.fromkeys(args.methods or METHODS))
+    methods = get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))
+    marl = _marl_models(args, [m.name for m in methods])  # before any work: a missing policy fails here
     opts = {}
     if args.c_max is not None and args.c_max != "auto":
         opts["c_max"] = args.c_max
@@ -256,6 +263,7 @@ def run(args: argparse.Namespace) -> int:
 
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
+    models.update(marl)
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
                                   sparsify=args.sparsify, max_edges=args.max_edges)
     progress = show_progress(args.no_progress or args.json)
@@ -338,6 +346,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _marl_models(args: argparse.Namespace, names) -> dict:
+    """The policies of the MARL methods among ``names`` (``--ippo``/``--mappo-lag`` or the shipped ones)."""
+    from baselines.marl_rows import load_marl_models
+
+    return load_marl_models(args.env, names, {"ippo": args.ippo, "mappo_lag": args.mappo_lag})
+
+
 def write_anatomy(rows, failures, out, title: str = "") -> str:
     """Write the failure anatomy of an evaluation into ``out``: ``failures.csv`` (one row per agent
     that did not arrive), ``anatomy.csv`` / ``anatomy.md`` (reasons per cell) and ``anatomy.png``
@@ -365,7 +380,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     from agents import load_pretrained
     from baselines.cli import show_progress
     from baselines.evaluation import aggregate, markdown_table, write_csv
-    from baselines.methods import get_methods
+    from baselines.methods import MARL_METHODS, get_methods
     from baselines.output import RowWriter
     from baselines.paper_protocol import (
         PAPER_PROTOCOL_METHODS,
@@ -381,9 +396,10 @@ def _run_paper(args: argparse.Namespace) -> int:
         raise ValueError(f"--protocol paper needs a 2D grid map (e.g. SafeCenterDot-v0) or an apartment "
                          f"(SafeApartment0-v0 .. SafeApartment3-v0), not {args.env}")
     names = list(dict.fromkeys(args.methods or PAPER_PROTOCOL_METHODS))
-    if set(names) - set(PAPER_PROTOCOL_METHODS):
-        raise ValueError(f"--protocol paper runs {', '.join(PAPER_PROTOCOL_METHODS)}; not "
-                         f"{sorted(set(names) - set(PAPER_PROTOCOL_METHODS))}")
+    allowed = PAPER_PROTOCOL_METHODS + MARL_METHODS
+    if set(names) - set(allowed):
+        raise ValueError(f"--protocol paper runs {', '.join(allowed)}; not {sorted(set(names) - set(allowed))}")
+    marl = _marl_models(args, names)
     for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
@@ -400,6 +416,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
+    models.update(marl)
     setup = PaperSetup.build(args.env, models, n_nodes=args.nodes, seed=args.seed)
     progress = show_progress(args.no_progress or args.json)
     with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come

@@ -1,0 +1,319 @@
+"""What both multi-agent trainers share: the training env, the held-out evaluation, the run folder
+(progress bar, TensorBoard, evaluation log, resume points) and the loaded policy (:class:`MarlAgent`)."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Mapping, Optional
+
+import numpy as np
+from pettingzoo.utils.wrappers import BaseParallelWrapper
+
+from .config import MarlConfig
+
+#: file suffix of each algorithm's weights (an SB3 zip for IPPO, a torch file for MAPPO-Lagrangian)
+SUFFIX = {"ippo": ".zip", "mappo-lag": ".pt"}
+
+Act = Callable[[np.ndarray], np.ndarray]
+
+
+def make_env(env_id: str, n_agents: int, max_cycles: int, shaping: float = 0.0, gamma: float = 0.99,
+             **kwargs: Any):
+    """The parallel env with flat observations (``[position, goal]`` per agent, normalised); with
+    ``shaping > 0`` its rewards carry :class:`PotentialShaping`."""
+    import safe_mapf_envs
+
+    env = safe_mapf_envs.parallel_env(env_id, n_agents=n_agents, max_cycles=max_cycles,
+                                      observation_format="flat", **kwargs)
+    return PotentialShaping(env, shaping, gamma) if shaping > 0 else env
+
+
+class PotentialShaping(BaseParallelWrapper):
+    """Potential-based reward shaping (Ng, Harada and Russell, 1999) from the agent's own observation.
+
+    ``r += weight * (gamma * phi(o') - phi(o))`` with ``phi(o) = -|goal - position|`` in steps of
+    full speed (straight-line distance, read from the flat observation; ``phi = 0`` once the agent
+    arrived). Shaping of this form leaves the optimal policies unchanged; it gives PPO a signal
+    on maps where random motion rarely reaches a goal (``SafeCentralObstacle-v0``: 55 x 55 units,
+    goals reached within 1). Costs are untouched.
+    """
+
+    def __init__(self, env, weight: float, gamma: float) -> None:
+        super().__init__(env)
+        self.weight, self.gamma = float(weight), float(gamma)
+        base = env.unwrapped
+        self._scale = np.asarray(base.scenario.size, dtype=np.float64) / float(getattr(base, "action_scale", 1.0))
+        self._phi: Dict[str, float] = {}
+
+    def _potential(self, obs: np.ndarray) -> float:
+        o = np.asarray(obs, dtype=np.float64)
+        return -float(np.hypot(*((o[2:4] - o[0:2]) * self._scale)))
+
+    def reset(self, seed: Optional[int] = None, options: Optional[dict] = None):
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self._phi = {a: self._potential(o) for a, o in obs.items()}
+        return obs, infos
+
+    def step(self, actions):
+        obs, rewards, terms, truncs, infos = self.env.step(actions)
+        rewards = dict(rewards)
+        for a in rewards:
+            new = 0.0 if terms[a] else self._potential(obs[a])
+            rewards[a] += self.weight * (self.gamma * new - self._phi[a])
+            self._phi[a] = new
+        return obs, rewards, terms, truncs, infos
+
+
+def flat_observations(observations: Mapping[str, Any], names: List[str]) -> np.ndarray:
+    """The agents' observations as one ``(len(names), d)`` float32 array (Dict observations flattened)."""
+    from safe_mapf_envs import flatten_observation
+
+    rows = [observations[a] for a in names]
+    if rows and isinstance(rows[0], Mapping):
+        rows = [flatten_observation(o) for o in rows]
+    return np.asarray(rows, dtype=np.float32).reshape(len(names), -1)
+
+
+def evaluate_policy(act: Act, env_id: str, n_agents: int, max_cycles: int, episodes: int,
+                    seed: int, **env_kwargs: Any) -> Dict[str, float]:
+    """Held-out episodes (seeds ``seed``, ``seed + 1``, ...) with deterministic actions.
+
+    Returns the share of episodes in which every agent arrived (``success_rate``), the share of
+    agents that arrived (``arrival_rate``), an agent's mean episode cost and the mean episode length.
+    """
+    env = make_env(env_id, n_agents, max_cycles, **env_kwargs)
+    success, arrived, costs, steps = [], [], [], []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)
+        cost = np.zeros(n_agents)
+        reached = 0
+        t = 0
+        while env.agents:
+            names = list(env.agents)
+            actions = act(flat_observations(obs, names))
+            obs, _, term, _, infos = env.step(dict(zip(names, actions)))
+            t += 1
+            for a, info in infos.items():
+                cost[env.agent_name_mapping[a]] += float(info["cost"])
+            reached += sum(bool(v) for v in term.values())
+        success.append(reached == n_agents)
+        arrived.append(reached / n_agents)
+        costs.append(float(cost.mean()))
+        steps.append(t)
+    env.close()
+    return {"success_rate": float(np.mean(success)), "arrival_rate": float(np.mean(arrived)),
+            "mean_cost": float(np.mean(costs)), "mean_steps": float(np.mean(steps))}
+
+
+class RunFolder:
+    """The output folder of a run: settings, evaluations, resume points, summary, progress and TensorBoard.
+
+    Files: ``config.json`` (settings, command, versions), ``evaluations.jsonl`` (one line per
+    evaluation), ``checkpoint<suffix>`` + ``checkpoint.json`` (the last resume point),
+    ``model<suffix>`` + ``model.json`` (the final policy, loadable with :func:`load_marl`),
+    ``summary.json``.
+    """
+
+    def __init__(self, cfg: MarlConfig, command: Optional[List[str]] = None) -> None:
+        self.cfg = cfg
+        self.out = self.folder(cfg)
+        self.suffix = SUFFIX[cfg.algo]
+        self.command = command
+        self.state = self.check(cfg)
+        self.start_steps = int(self.state.get("timesteps", 0))
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.t0 = time.perf_counter()
+        self.cpu0 = time.process_time()
+        self.wall_before = float(self.state.get("wall_s", 0.0))
+        self.last_eval: Dict[str, float] = {}
+        self.bar: Any = None
+        from stable_baselines3.common.logger import Logger, make_output_format
+
+        formats = [make_output_format("tensorboard", cfg.tensorboard_log)] if cfg.tensorboard_log else []
+        self.logger = Logger(cfg.tensorboard_log, formats)
+        (self.out / "config.json").write_text(json.dumps(
+            {"config": asdict(self.cfg), "command": command, "python": platform.python_version(),
+             "versions": _versions()}, indent=1))
+
+    @staticmethod
+    def folder(cfg: MarlConfig) -> Path:
+        """The run's output folder (default ``runs/<env>-<algo>-s<seed>``)."""
+        return Path(cfg.out_dir or os.path.join("runs", f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"))
+
+    @classmethod
+    def check(cls, cfg: MarlConfig) -> Dict[str, Any]:
+        """The resume point's description with ``cfg.resume`` (``{}`` without); ``ValueError`` if there is
+        none to resume, if it belongs to another run, or if a fresh run would overwrite one."""
+        out = cls.folder(cfg)
+        meta = out / "checkpoint.json"
+        if not cfg.resume:
+            if meta.exists():
+                raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another --out")
+            return {}
+        if not meta.exists():
+            raise ValueError(f"--resume: {out} has no resume point (checkpoint.json); start without --resume")
+        state = json.loads(meta.read_text())
+        if state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
+            raise ValueError(f"--resume: {out} holds a {state.get('algo')} run on {state.get('env_id')}, "
+                             f"not {cfg.algo} on {cfg.env_id}")
+        return state
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.out / f"checkpoint{self.suffix}"
+
+    def open_bar(self) -> None:
+        if self.cfg.progress_bar:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=self.cfg.timesteps, initial=self.start_steps, unit="step", mininterval=1.0,
+                            desc=f"{self.cfg.algo} {self.cfg.env_id}")
+
+    def advance(self, steps: int) -> None:
+        if self.bar is not None:
+            self.bar.update(steps)
+
+    def wall(self) -> float:
+        return self.wall_before + time.perf_counter() - self.t0
+
+    def evaluate(self, act: Act, steps: int, extra: Optional[Dict[str, float]] = None) -> Dict[str, float]:
+        """Run the held-out evaluation, log it (file, TensorBoard) and return it."""
+        cfg = self.cfg
+        ev = evaluate_policy(act, cfg.env_id, cfg.n_agents, cfg.max_cycles, cfg.eval_episodes, cfg.eval_seed,
+                             **cfg.env_kwargs(training=False))
+        line = {"timesteps": steps, "wall_s": round(self.wall(), 1), **ev, **(extra or {})}
+        with open(self.out / "evaluations.jsonl", "a") as f:
+            f.write(json.dumps(line) + "\n")
+        for k, v in line.items():
+            self.logger.record(f"eval/{k}", v)
+        self.logger.dump(steps)
+        self.last_eval = ev
+        return ev
+
+    def meta(self, steps: int, obs_dim: int, extra: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+        cfg = self.cfg
+        return {"algo": cfg.algo, "env_id": cfg.env_id, "n_agents": cfg.n_agents, "obs_dim": int(obs_dim),
+                "timesteps": int(steps), "wall_s": round(self.wall(), 1), "config": asdict(cfg),
+                "command": self.command, **(extra or {})}
+
+    def save_meta(self, name: str, meta: Dict[str, Any]) -> None:
+        (self.out / f"{name}.json").write_text(json.dumps(meta, indent=1))
+
+    def finish(self, steps: int, obs_dim: int, extra: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+        """Close the bar and the logger, write ``model.json`` and ``summary.json``; returns the summary."""
+        if self.bar is not None:
+            self.bar.close()
+        self.logger.close()
+        meta = self.meta(steps, obs_dim, extra)
+        self.save_meta("model", meta)
+        summary = {**{k: meta[k] for k in ("algo", "env_id", "n_agents", "timesteps", "wall_s", "command")},
+                   "cpu_s": round(time.process_time() - self.cpu0, 1), "model": str(self.out / f"model{self.suffix}"),
+                   "final_evaluation": self.last_eval, **(extra or {})}
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=1))
+        return summary
+
+
+def _versions() -> Dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("torch", "stable-baselines3", "supersuit", "pettingzoo", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+class MarlAgent:
+    """A trained parameter-shared policy: the same network acts for every agent, from its own
+    flat observation ``[position, goal]``; ``act`` is deterministic (the policy's mean action).
+
+    Load one with :func:`load_marl` or :func:`load_marl_pretrained`.
+    """
+
+    def __init__(self, act: Act, meta: Dict[str, Any]) -> None:
+        self._act = act
+        self.meta = dict(meta)
+        self.algo: str = meta["algo"]
+        self.env_id: str = meta["env_id"]
+        self.obs_dim: int = int(meta["obs_dim"])
+
+    def act(self, observations: np.ndarray) -> np.ndarray:
+        """Actions ``(n, 2)`` for ``n`` agents' flat observations ``(n, obs_dim)``."""
+        obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
+            raise ValueError(f"{self.algo} policy: expected observations of shape (n, {self.obs_dim}), "
+                             f"got {obs.shape}")
+        return np.asarray(self._act(obs), dtype=np.float32).reshape(len(obs), -1)
+
+    def act_dict(self, observations: Mapping[str, Any]) -> Dict[str, np.ndarray]:
+        """Actions keyed by agent, for a PettingZoo observation dict (Dict or flat observations)."""
+        names = list(observations)
+        return dict(zip(names, self.act(flat_observations(observations, names)))) if names else {}
+
+    def __repr__(self) -> str:
+        return f"MarlAgent({self.algo!r}, {self.env_id!r}, timesteps={self.meta.get('timesteps')})"
+
+
+def load_marl(path: str, env_id: Optional[str] = None) -> MarlAgent:
+    """Load a policy saved by ``safe-mapf train-marl`` (its ``model.json`` must lie beside it).
+
+    ``env_id``: raise ``ValueError`` if the policy was trained on another map.
+    """
+    p = Path(path)
+    meta_path = p.with_suffix(".json")
+    if not p.exists():
+        raise ValueError(f"no MARL checkpoint at {path}")
+    if not meta_path.exists():
+        raise ValueError(f"{path}: its description {meta_path.name} is missing (written next to it by train-marl)")
+    meta = json.loads(meta_path.read_text())
+    if env_id is not None and meta.get("env_id") != str(env_id).split(":")[-1]:
+        raise ValueError(f"{path} was trained on {meta.get('env_id')!r}, not {env_id!r}")
+    if meta.get("algo") == "ippo":
+        from .ippo import load_ippo_act
+
+        act = load_ippo_act(str(p))
+    elif meta.get("algo") == "mappo-lag":
+        from .mappo_lag import load_mappo_act
+
+        act = load_mappo_act(str(p))
+    else:
+        raise ValueError(f"{meta_path}: unknown algo {meta.get('algo')!r}")
+    return MarlAgent(act, meta)
+
+
+_PRETRAINED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "pretrained")
+
+
+def pretrained_marl_path(env_id: str, algo: str) -> str:
+    """Path of the shipped ``algo`` policy of ``env_id`` (``ValueError`` if none is shipped)."""
+    from .config import ALGOS
+
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+    env_id = str(env_id).split(":")[-1]
+    path = os.path.join(_PRETRAINED, f"{env_id}_{algo.replace('-', '_')}{SUFFIX[algo]}")
+    if not os.path.exists(path):
+        have = sorted(n for n in os.listdir(_PRETRAINED) if n.endswith((".pt", "_ippo.zip")))
+        raise ValueError(f"no shipped {algo} policy for {env_id!r}; shipped: {', '.join(have) or 'none'}")
+    return path
+
+
+def load_marl_pretrained(env_id: str, algo: str, path: Optional[str] = None) -> MarlAgent:
+    """The shipped ``algo`` policy of ``env_id`` (or the one at ``path``, checked against ``env_id``)."""
+    return load_marl(path if path is not None else pretrained_marl_path(env_id, algo), env_id=env_id)
+
+
+def print_line(summary: Dict[str, Any]) -> str:
+    """One line that reports a finished run."""
+    ev = summary.get("final_evaluation", {})
+    lam = f" lambda={summary['lagrange_multiplier']:.3f}" if "lagrange_multiplier" in summary else ""
+    return (f"{summary['env_id']} {summary['algo']}: {summary['timesteps']} agent steps in {summary['wall_s']} s; "
+            f"success={ev.get('success_rate', float('nan')):.3f} arrival={ev.get('arrival_rate', float('nan')):.3f} "
+            f"cost={ev.get('mean_cost', float('nan')):.2f}{lam}; saved {summary['model']}")
+
