@@ -35,7 +35,7 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
     ``count_start_cost``: add the start state's cost of a lone agent (the paper protocol's convention).
     """
     from .anatomy import FailureTracker
-    from .methods import Execution, _geodesic, tally_step
+    from .execution import Execution, geodesic_of, tally_step
 
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -63,9 +63,9 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
     failures = []
     if not reached.all():
         failures = tracker.diagnose(trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at,
-                                    _geodesic(env), planned=False)
+                                    geodesic_of(env), planned=False)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, 0.0, "direct", trajectories,
-                     {"algo": agent.algo}, failures)
+                     {"algo": agent.algo}, failures, parked_at)
 
 
 __all__ = ["MARL_ALGOS", "execute_marl", "load_marl_models"]

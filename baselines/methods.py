@@ -21,17 +21,17 @@ for every method, the same yield rule between agents.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from agents.search.models import distance_fn, policy_fn
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
 
 from .anatomy import AgentFailure, FailureTracker
+from .execution import Execution, geodesic_of, tally_step
 
 
 @dataclass(frozen=True)
@@ -104,25 +104,6 @@ def get_methods(names) -> List[Method]:
             raise ValueError(f"unknown method {n!r}; known: {', '.join(METHODS)}")
         out.append(METHODS[n])
     return out
-
-
-@dataclass
-class Execution:
-    """What happened when a method ran one problem (all arrays per agent)."""
-
-    success: bool
-    reached: np.ndarray
-    cost: np.ndarray
-    steps: int
-    collisions: int  # contacts between two agents, each counted when it begins
-    planning_time: float
-    plan_status: str
-    trajectories: np.ndarray  # (T + 1, K, 2) positions, for figures
-    extra: Dict[str, Any] = field(default_factory=dict)
-    #: why each agent that did not arrive failed (see :mod:`baselines.anatomy`)
-    failures: List[AgentFailure] = field(default_factory=list)
-    #: per agent, the step at which it arrived (``-1``: it did not)
-    arrival: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def execute(
@@ -206,40 +187,12 @@ def execute(
     failures: List[AgentFailure] = []
     if not reached.all():
         failures = tracker.diagnose(
-            trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at, _geodesic(env),
+            trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at, geodesic_of(env),
             planned=plan is None or plan.solved, legs={a: policy.leg(a) for a in names},
             escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
                      plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at)
 
 
-def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
-               steps: int) -> set:
-    """Add one step's obstacle costs and arrivals (at step ``steps``) to the per-agent arrays; returns
-    the contacts under way, as pairs of agent names."""
-    now: set = set()
-    for a, info in infos.items():
-        i = index[a]
-        cost[i] += float(info.get("obstacle_cost", info["cost"]))
-        now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
-        if term.get(a, False):
-            reached[i] = True
-            parked_at[i] = steps
-    return now
-
-
-def _geodesic(env) -> Any:
-    """``geodesic(a, b) -> float`` on ``env``'s map (ground truth; ``nan`` where a point is not free)."""
-
-    def geodesic(a: np.ndarray, b: np.ndarray) -> float:
-        try:
-            return float(np.asarray(env.geodesic_distance(np.asarray(a, np.float64), np.asarray(b, np.float64))))
-        except ValueError:
-            return math.nan
-
-    return geodesic
-
-
-__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "Execution", "MARL_METHODS", "METHODS", "Method",
-           "PAPER_METHODS",
-           "distance_fn", "execute", "get_methods", "policy_fn"]
+__all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "MARL_METHODS", "METHODS", "Method", "PAPER_METHODS",
+           "execute", "get_methods"]

@@ -252,7 +252,7 @@ class PaperExecution:
 
 def execute_paper(env, setup: PaperSetup, method: Method, problem: Problem, seed: int = 0) -> PaperExecution:
     """Run ``method`` on ``problem`` in ``env`` (a parallel env with ``agent_collisions=False``)."""
-    from .methods import distance_fn, policy_fn
+    from agents.search.models import distance_fn, policy_fn
 
     if method.policy in MARL_METHODS:  # the MARL policy alone, cost counted as below
         from .marl_rows import execute_marl

@@ -12,8 +12,9 @@ Both are goal-conditioned: each agent acts on its own ``[position, goal]``. Trai
 :func:`train_marl` (``safe-mapf train-marl``); load with :func:`load_marl` or
 :func:`load_marl_pretrained` and act with :meth:`MarlAgent.act`.
 """
-from .common import MarlAgent, evaluate_policy, load_marl, load_marl_pretrained, pretrained_marl_path
+from .common import evaluate_policy
 from .config import ALGOS, MarlConfig
+from .loading import MarlAgent, load_marl, load_marl_pretrained, pretrained_marl_path
 from .training import train_marl
 
 __all__ = ["ALGOS", "MarlAgent", "MarlConfig", "evaluate_policy", "load_marl", "load_marl_pretrained",

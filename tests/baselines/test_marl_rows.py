@@ -7,7 +7,7 @@ import torch
 
 import safe_mapf_envs
 from agents.marl import MarlConfig, train_marl
-from agents.marl.common import MarlAgent
+from agents.marl.loading import MarlAgent
 from baselines.cli import main
 from baselines.marl_rows import execute_marl
 

@@ -1,0 +1,94 @@
+"""Loading trained multi-agent policies: :class:`MarlAgent`, :func:`load_marl`, :func:`load_marl_pretrained`.
+
+Above both trainers (:mod:`agents.marl.ippo`, :mod:`agents.marl.mappo_lag`), whose savers it reads.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, Mapping, Optional
+
+import numpy as np
+
+from .common import SUFFIX, Act, flat_observations
+from .config import ALGOS
+from .ippo import load_ippo_act
+from .mappo_lag import load_mappo_act
+
+
+class MarlAgent:
+    """A trained parameter-shared policy: the same network acts for every agent, from its own
+    flat observation ``[position, goal]``; ``act`` is deterministic (the policy's mean action).
+
+    Load one with :func:`load_marl` or :func:`load_marl_pretrained`.
+    """
+
+    def __init__(self, act: Act, meta: Dict[str, Any]) -> None:
+        self._act = act
+        self.meta = dict(meta)
+        self.algo: str = meta["algo"]
+        self.env_id: str = meta["env_id"]
+        self.obs_dim: int = int(meta["obs_dim"])
+
+    def act(self, observations: np.ndarray) -> np.ndarray:
+        """Actions ``(n, 2)`` for ``n`` agents' flat observations ``(n, obs_dim)``."""
+        obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
+            raise ValueError(f"{self.algo} policy: expected observations of shape (n, {self.obs_dim}), "
+                             f"got {obs.shape}")
+        return np.asarray(self._act(obs), dtype=np.float32).reshape(len(obs), -1)
+
+    def act_dict(self, observations: Mapping[str, Any]) -> Dict[str, np.ndarray]:
+        """Actions keyed by agent, for a PettingZoo observation dict (Dict or flat observations)."""
+        names = list(observations)
+        return dict(zip(names, self.act(flat_observations(observations, names)))) if names else {}
+
+    def __repr__(self) -> str:
+        return f"MarlAgent({self.algo!r}, {self.env_id!r}, timesteps={self.meta.get('timesteps')})"
+
+
+def load_marl(path: str, env_id: Optional[str] = None) -> MarlAgent:
+    """Load a policy saved by ``safe-mapf train-marl`` (its ``model.json`` must lie beside it).
+
+    ``env_id``: raise ``ValueError`` if the policy was trained on another map.
+    """
+    p = Path(path)
+    meta_path = p.with_suffix(".json")
+    if not p.exists():
+        raise ValueError(f"no MARL checkpoint at {path}")
+    if not meta_path.exists():
+        raise ValueError(f"{path}: its description {meta_path.name} is missing (written next to it by train-marl)")
+    meta = json.loads(meta_path.read_text())
+    if env_id is not None and meta.get("env_id") != str(env_id).split(":")[-1]:
+        raise ValueError(f"{path} was trained on {meta.get('env_id')!r}, not {env_id!r}")
+    if meta.get("algo") == "ippo":
+        act = load_ippo_act(str(p))
+    elif meta.get("algo") == "mappo-lag":
+        act = load_mappo_act(str(p))
+    else:
+        raise ValueError(f"{meta_path}: unknown algo {meta.get('algo')!r}")
+    return MarlAgent(act, meta)
+
+
+_PRETRAINED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "pretrained")
+
+
+def pretrained_marl_path(env_id: str, algo: str) -> str:
+    """Path of the shipped ``algo`` policy of ``env_id`` (``ValueError`` if none is shipped)."""
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+    env_id = str(env_id).split(":")[-1]
+    path = os.path.join(_PRETRAINED, f"{env_id}_{algo.replace('-', '_')}{SUFFIX[algo]}")
+    if not os.path.exists(path):
+        have = sorted(n for n in os.listdir(_PRETRAINED) if n.endswith((".pt", "_ippo.zip")))
+        raise ValueError(f"no shipped {algo} policy for {env_id!r}; shipped: {', '.join(have) or 'none'}")
+    return path
+
+
+def load_marl_pretrained(env_id: str, algo: str, path: Optional[str] = None) -> MarlAgent:
+    """The shipped ``algo`` policy of ``env_id`` (or the one at ``path``, checked against ``env_id``)."""
+    return load_marl(path if path is not None else pretrained_marl_path(env_id, algo), env_id=env_id)
+
+
+__all__ = ["MarlAgent", "load_marl", "load_marl_pretrained", "pretrained_marl_path"]

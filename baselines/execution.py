@@ -1,0 +1,63 @@
+"""What one run of a method on a problem produced, and the per-step bookkeeping every runner shares.
+
+Below :mod:`baselines.methods` (the search methods) and :mod:`baselines.marl_rows` (the
+multi-agent RL policies), which both fill an :class:`Execution`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Dict, List
+
+import numpy as np
+
+from .anatomy import AgentFailure
+
+
+@dataclass
+class Execution:
+    """What happened when a method ran one problem (all arrays per agent)."""
+
+    success: bool
+    reached: np.ndarray
+    cost: np.ndarray
+    steps: int
+    collisions: int  # contacts between two agents, each counted when it begins
+    planning_time: float
+    plan_status: str
+    trajectories: np.ndarray  # (T + 1, K, 2) positions, for figures
+    extra: Dict[str, Any] = field(default_factory=dict)
+    #: why each agent that did not arrive failed (see :mod:`baselines.anatomy`)
+    failures: List[AgentFailure] = field(default_factory=list)
+    #: per agent, the step at which it arrived (``-1``: it did not)
+    arrival: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+
+def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
+               steps: int) -> set:
+    """Add one step's obstacle costs and arrivals (at step ``steps``) to the per-agent arrays; returns
+    the contacts under way, as pairs of agent names."""
+    now: set = set()
+    for a, info in infos.items():
+        i = index[a]
+        cost[i] += float(info.get("obstacle_cost", info["cost"]))
+        now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
+        if term.get(a, False):
+            reached[i] = True
+            parked_at[i] = steps
+    return now
+
+
+def geodesic_of(env) -> Any:
+    """``geodesic(a, b) -> float`` on ``env``'s map (ground truth; ``nan`` where a point is not free)."""
+
+    def geodesic(a: np.ndarray, b: np.ndarray) -> float:
+        try:
+            return float(np.asarray(env.geodesic_distance(np.asarray(a, np.float64), np.asarray(b, np.float64))))
+        except ValueError:
+            return math.nan
+
+    return geodesic
+
+
+__all__ = ["Execution", "geodesic_of", "tally_step"]
