@@ -114,7 +114,8 @@ def test_centerdot_agents_are_shipped_and_the_constrained_one_is_safer():
 def test_every_shipped_checkpoint_names_classes_that_still_exist():
     """SB3 stores the classes a checkpoint needs (policy, replay buffer, Lagrange multiplier) by
     module path; moving one of them would make its load drop or fail. Each stored object
-    deserialises, and the policy class is the one SafeGoalTD3 builds."""
+    deserialises, and the policy class is the one SafeGoalTD3 builds (the MARL baselines' policies
+    are checked in ``test_marl_pretrained.py``)."""
     import base64
     import json
     import zipfile
@@ -125,7 +126,8 @@ def test_every_shipped_checkpoint_names_classes_that_still_exist():
     from agents.lagrangian import LagrangeMultiplier
     from agents.policies import SafeGoalPolicy
 
-    checkpoints = sorted(Path(pretrained_path(ENV, "unconstrained")).parent.glob("*.zip"))
+    folder = Path(pretrained_path(ENV, "unconstrained")).parent
+    checkpoints = sorted([*folder.glob("*_unconstrained.zip"), *folder.glob("*_constrained.zip")])
     assert len(checkpoints) >= 12
     for path in checkpoints:
         data = json.loads(zipfile.ZipFile(path).read("data"))
