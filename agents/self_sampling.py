@@ -219,19 +219,21 @@ class SelfSampler(ProblemSampler):
         u: Any = env.unwrapped  # the project's env: sample_states
         n_narrow = int(round(self.narrow_fraction * self.n_keep))
         n_scored = self.n_keep - n_narrow
-        n = self.n_candidates if n_scored else 0
-        starts = np.asarray(u.sample_states(n, self.rng))
-        goals = np.asarray(u.sample_states(n, self.rng))
-        by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals)) if n else \
-            (np.empty(0), None)
-        n_cost = 0 if by_cost is None else int(round(self.cost_fraction * n_scored))
-        chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost] if n_cost else np.empty(0, int)
-        rest = by_distance.copy()
-        rest[chosen] = np.inf
-        n_rest = n_scored - n_cost
-        if n_rest:
-            chosen = np.concatenate([chosen, np.argpartition(rest, n_rest - 1)[:n_rest]])
-        pool = [(starts[i], goals[i]) for i in chosen]
+        chosen = np.empty(0, int)
+        pool: List[Tuple[np.ndarray, np.ndarray]] = []
+        if n_scored:  # the paper's self-sampling: the candidates the critics score best
+            starts = np.asarray(u.sample_states(self.n_candidates, self.rng))
+            goals = np.asarray(u.sample_states(self.n_candidates, self.rng))
+            by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
+            n_cost = 0 if by_cost is None else int(round(self.cost_fraction * n_scored))
+            if n_cost:
+                chosen = np.argpartition(cast(np.ndarray, by_cost), n_cost - 1)[:n_cost]
+            rest = by_distance.copy()
+            rest[chosen] = np.inf
+            n_rest = n_scored - n_cost
+            if n_rest:
+                chosen = np.concatenate([chosen, np.argpartition(rest, n_rest - 1)[:n_rest]])
+            pool = [(starts[i], goals[i]) for i in chosen]
         if n_narrow:
             step = float(getattr(u, "action_scale", 1.0))
             lo, hi = self.narrow_reach

@@ -388,13 +388,7 @@ def _run_paper(args: argparse.Namespace) -> int:
         choose_best_c_max,
         evaluate_paper,
     )
-    from safe_mapf_envs.maps import MAPS
-    from safe_mapf_envs.registration import env_spec
 
-    spec = env_spec(args.env)
-    if spec.layout not in MAPS and not spec.layout.startswith("Apartment"):
-        raise ValueError(f"--protocol paper needs a 2D grid map (e.g. SafeCenterDot-v0) or an apartment "
-                         f"(SafeApartment0-v0 .. SafeApartment3-v0), not {args.env}")
     names = list(dict.fromkeys(args.methods or PAPER_PROTOCOL_METHODS))
     allowed = PAPER_PROTOCOL_METHODS + MARL_METHODS
     if set(names) - set(allowed):
