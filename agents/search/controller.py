@@ -17,7 +17,12 @@ current waypoint's observation. Rules, all from observations only:
   has replanned;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
-  first, ties broken by index); the paper states this rule, we implement it;
+  first, ties broken by index); the paper states this rule, we implement it. Only two agents
+  that would both move yield to each other: one that already stands still (at its waypoint,
+  waiting for its departure time or for an agent the plan sends first) is passed. Otherwise an
+  agent that waits for a neighbour to go first can have priority over it, the neighbour yields
+  to the agent that waits for it, and neither moves until ``order_patience`` runs out, again at
+  every waypoint;
 - **unstick**: an agent that was free to move but whose observation has hardly changed over
   ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
   other), or (optional) that came no closer to its target for ``progress_patience`` steps (it
@@ -339,7 +344,7 @@ class WaypointController:
                 reason[i] = f"wait:{waiting[a]}"
                 self.stats.waits += 1
         if self.safety_radius is not None and len(live) > 1:
-            yielders = self._yield_mask(live, obs)
+            yielders = self._yield_mask(live, obs, ~hold)
             for i, w in yielders.items():
                 if not hold[i]:
                     reason[i] = f"yield:{live[w]}"
@@ -447,10 +452,14 @@ class WaypointController:
                     self.stats.skips += 1
             actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
 
-    def _yield_mask(self, live: List[str], obs: np.ndarray) -> Dict[int, int]:
-        """The agents (indices into ``live``) that yield on this step, each to the agent it yields to."""
-        n = len(live)
-        ii, jj = np.triu_indices(n, 1)
+    def _yield_mask(self, live: List[str], obs: np.ndarray, moving: np.ndarray) -> Dict[int, int]:
+        """The agents (indices into ``live``) that yield on this step, each to the agent it yields to;
+        only pairs of agents that would both move (``moving``) yield."""
+        ii, jj = np.triu_indices(len(live), 1)
+        both = moving[ii] & moving[jj]
+        ii, jj = ii[both], jj[both]
+        if len(ii) == 0:
+            return {}
         if self.proximity is not None:
             prox = np.asarray(self.proximity(obs[ii], obs[jj]), dtype=np.float64)
         else:

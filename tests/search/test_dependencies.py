@@ -101,6 +101,29 @@ def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_
         c.set_plans({"z": plans["a"]})
 
 
+def test_an_agent_does_not_yield_to_one_that_waits_for_it():
+    """A waits (plan order) until B has passed; B is close by and A has the yield priority (lower
+    index, same lag). B must go: yielding to an agent that stands still for it deadlocks both
+    until the order's patience runs out (seen in 5-agent apartment runs, again at every waypoint)."""
+    plans = {"a": AgentPlan(np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([9.0, 0.0]), starts_at_first=True,
+                            after={1: [("b", 1)]}),
+             "b": AgentPlan(np.array([[0.0, 1.0], [5.0, 1.0]]), np.array([9.0, 1.0]), starts_at_first=True)}
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=3.0,
+                           stuck_window=None, order_patience=50)
+    for _ in range(3):
+        act = c.act({"a": np.array([0.0, 0.0]), "b": np.array([0.0, 1.0])})
+    assert c.stats.holding == {"a": "wait:b", "b": None} and c.stats.yields == 0
+    assert set(act) == {"a", "b"} and c.index["a"] == 0
+    c.act({"a": np.array([0.0, 0.0]), "b": np.array([5.0, 1.0])})  # b reached its waypoint: a may go
+    assert c.index["a"] == 1 and c.stats.holding["a"] is None
+    # two agents that both move still yield: the lower priority stands still
+    c = WaypointController(still, line_distance, {"a": AgentPlan(np.zeros((0, 2)), np.array([9.0, 0.0])),
+                                                  "b": AgentPlan(np.zeros((0, 2)), np.array([9.0, 1.0]))},
+                           reach_threshold=0.5, safety_radius=3.0, stuck_window=None)
+    c.act({"a": np.array([0.0, 0.0]), "b": np.array([0.0, 1.0])})
+    assert c.stats.holding == {"a": None, "b": "yield:a"}
+
+
 def test_an_agent_that_hovers_away_from_its_target_counts_as_stuck_and_replans():
     wp = np.array([[0.0, 0.0], [5.0, 0.0]])
     asked = []
