@@ -364,7 +364,10 @@ class ProblemGraph:
 
     Attributes:
         observations: the node observations, ``(N + 2K, ...)``.
-        D, C: dense predicted distance and cost between every pair of nodes.
+        D, C: dense predicted distance and cost between every pair of nodes; with a critic
+            that scores only the close pairs (:meth:`NodePairwise.within`), a pair of an
+            endpoint and another node at ``d_max`` or beyond holds a lower bound of its
+            distance and an infinite cost.
         graph: the pruned graph (:class:`WaypointGraph`) the search runs on.
         n_buffer: N, the number of buffer nodes.
         c_max: the largest cost cut-off used (above the one asked for where it was relaxed).
