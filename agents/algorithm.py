@@ -507,11 +507,12 @@ class SafeGoalTD3(OffPolicyAlgorithm):
 
     def pairwise(self, obs_a: np.ndarray, obs_b: np.ndarray, aggregate: str = "max",
                  chunk_size: int = 2048, threads: Optional[int] = None,
-                 progress: Optional[bool] = None) -> Tuple[np.ndarray, np.ndarray]:
+                 progress: Optional[bool] = None, within: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray]:
         """``(D, C)`` together, sharing the actor's pass over the pairs (cheaper than two calls;
-        ``threads`` and ``progress`` as in :meth:`pairwise_distance`)."""
+        ``threads`` and ``progress`` as in :meth:`pairwise_distance`; ``within``: exact only below
+        that distance, far cheaper where most pairs are far apart, see ``SafeGoalPolicy.pairwise``)."""
         with torch_threads(inference_threads(threads)):
-            out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size, progress=progress)
+            out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size, progress, within)
         return out["distance"], out["cost"]
 
     # ------------------------------------------------------------------ save / load

@@ -98,19 +98,35 @@ def first_layer_products(codes: Tuple[th.Tensor, th.Tensor], head: EnsembleHead)
 
 
 def pair_head(head: EnsembleHead, parts, i0: int, i1: int, j0: int, j1: int,
-               actions: Optional[th.Tensor] = None) -> th.Tensor:
-    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``[i0, i1) x [j0, j1)`` (row-major)."""
-    pre_a, pre_b, w_act = parts
-    e = head.n_members
-    h = th.add(pre_a[:, i0:i1, None, :], pre_b[:, None, j0:j1, :]).view(e, (i1 - i0) * (j1 - j0), -1)
+              actions: Optional[th.Tensor] = None, members: Optional[slice] = None) -> th.Tensor:
+    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``[i0, i1) x [j0, j1)`` (row-major);
+    ``members`` (a slice) evaluates only those ensemble members."""
+    pre_a, pre_b, _ = parts
+    m = slice(None) if members is None else members
+    h = th.add(pre_a[m, i0:i1, None, :], pre_b[m, None, j0:j1, :]).flatten(1, 2)
+    return _finish_pairs(head, parts, h, actions, m)
+
+
+def pair_head_at(head: EnsembleHead, parts, rows: th.Tensor, cols: th.Tensor,
+                 actions: Optional[th.Tensor] = None) -> th.Tensor:
+    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``(rows[p], cols[p])`` (index tensors)."""
+    pre_a, pre_b, _ = parts
+    h = th.add(pre_a[:, rows, :], pre_b[:, cols, :])
+    return _finish_pairs(head, parts, h, actions, slice(None))
+
+
+def _finish_pairs(head: EnsembleHead, parts, h: th.Tensor, actions: Optional[th.Tensor], m: slice) -> th.Tensor:
+    """The layers of ``head`` (members ``m``) after the sum of the first-layer products ``h``."""
+    w_act = parts[2]
+    e = h.shape[0]
     if w_act is not None:
         assert actions is not None, "the critics' heads need the actions"
-        h.baddbmm_(actions.expand(e, -1, -1), w_act)
+        h.baddbmm_(actions.expand(e, -1, -1), w_act[m])
     h = _activate_(h, head.act)
     n_layers = len(head.layers)
     for k in range(1, n_layers):
         layer = head.linear(k)
-        h = th.baddbmm(layer.bias, h, layer.weight)
+        h = th.baddbmm(layer.bias[m], h, layer.weight[m])
         if k < n_layers - 1:
             h = _activate_(h, head.act)
     return h
@@ -121,4 +137,5 @@ def _activate_(h: th.Tensor, act: nn.Module) -> th.Tensor:
     return h.relu_() if isinstance(act, nn.ReLU) else act(h)
 
 
-__all__ = ["AGGREGATES", "EnsembleHead", "EnsembleLinear", "aggregate_ensemble", "first_layer_products", "pair_head"]
+__all__ = ["AGGREGATES", "EnsembleHead", "EnsembleLinear", "aggregate_ensemble", "first_layer_products", "pair_head",
+           "pair_head_at"]

@@ -9,6 +9,7 @@ copies, gathered in :class:`SafeGoalPolicy`. Its :meth:`SafeGoalPolicy.pairwise`
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Type, Union, cast
 
 import numpy as np
@@ -24,7 +25,7 @@ from .buffers import check_goal_space
 from .critics import CategoricalCritic
 from .distributional import cost_support, distance_support
 from .encoders import GoalPairExtractor, encode_chunked, is_image_space
-from .heads import AGGREGATES, aggregate_ensemble, first_layer_products, pair_head
+from .heads import AGGREGATES, aggregate_ensemble, first_layer_products, pair_head, pair_head_at
 
 
 class EncodedObservations:
@@ -375,6 +376,7 @@ class SafeGoalPolicy(BasePolicy):
         aggregate: str = "max",
         chunk_size: int = 2048,
         progress: Optional[bool] = None,
+        within: Optional[float] = None,
     ) -> Dict[str, np.ndarray]:
         """Distance and/or cost from every ``obs_a[i]`` to every ``obs_b[j]``: ``(N, M)`` float32 arrays.
 
@@ -388,10 +390,22 @@ class SafeGoalPolicy(BasePolicy):
         arrays are ``(E, N, M)``. ``progress``: a ``tqdm`` bar over the blocks: ``None`` shows
         it on a terminal once the build has run 2 s (short builds never show one), ``True``
         always, ``False`` never.
+
+        ``within`` (only with ``aggregate="max"`` and the distance among ``quantities``): the
+        values are exact only for the pairs whose distance is below ``within``. Every pair is
+        first scored by one member of the distance ensemble, a lower bound of the ensemble's
+        maximum; a pair whose bound is ``>= within`` keeps that bound as its distance and an
+        infinite cost, and only the other pairs are scored by every member. A planner that
+        keeps edges shorter than ``d_max`` needs no more, and attaching new observations to a
+        graph then costs about a third (most pairs are far apart).
         """
         self._check_quantities(quantities)
         if aggregate not in AGGREGATES:
             raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+        if within is not None and (aggregate != "max" or "distance" not in quantities):
+            raise ValueError("within needs aggregate='max' and the distance among the quantities (one member's "
+                             f"distance bounds only the maximum), got aggregate={aggregate!r}, "
+                             f"quantities={quantities!r}")
         if int(chunk_size) < 1:
             raise ValueError(f"chunk_size must be >= 1, got {chunk_size!r}")
         a, b = self._pair_input(obs_a, "obs_a"), self._pair_input(obs_b, "obs_b")
@@ -425,6 +439,9 @@ class SafeGoalPolicy(BasePolicy):
                 if bar is not None:
                     bar.update((i1 - i0) * (j1 - j0))
                 actions = th.tanh(pair_head(self.actor.mu, actor_parts, i0, i1, j0, j1))  # (1, P, A)
+                if within is not None:
+                    self._pairs_within(views, critics, critic_parts, actions, (i0, i1, j0, j1), float(within))
+                    continue
                 for q, c in critics.items():
                     v = c.expected(pair_head(c.head, critic_parts[q], i0, i1, j0, j1, actions))  # (E, P)
                     v = aggregate_ensemble(v, aggregate)
@@ -435,6 +452,25 @@ class SafeGoalPolicy(BasePolicy):
         if bar is not None:
             bar.close()
         return out
+
+    @staticmethod
+    def _pairs_within(views: Dict[str, th.Tensor], critics: Dict[str, CategoricalCritic], parts, actions: th.Tensor,
+                      block: Tuple[int, int, int, int], within: float) -> None:
+        """Fill one block of :meth:`pairwise` with ``within`` (see there): a lower bound from one
+        distance member everywhere, every member where that bound is below ``within``."""
+        i0, i1, j0, j1 = block
+        dist = critics["distance"]
+        bound = dist.expected(pair_head(dist.head, parts["distance"], i0, i1, j0, j1, actions, slice(0, 1)))[0]
+        views["distance"][i0:i1, j0:j1] = bound.view(i1 - i0, j1 - j0)
+        if "cost" in views:
+            views["cost"][i0:i1, j0:j1] = math.inf
+        near = th.nonzero(bound < within).squeeze(1)
+        if near.numel() == 0:
+            return
+        rows, cols = i0 + near // (j1 - j0), j0 + near % (j1 - j0)
+        for q, c in critics.items():
+            v = c.expected(pair_head_at(c.head, parts[q], rows, cols, actions[:, near]))
+            views[q][rows, cols] = aggregate_ensemble(v, "max")
 
 
 def _pair_progress(total: int, progress: Optional[bool]):

@@ -10,6 +10,8 @@ The graph never calls the environment; it takes matrices (from the critics, or a
 """
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 import zipfile
 from dataclasses import dataclass, field
@@ -52,6 +54,21 @@ class NodePairwise:
 
     def __call__(self, obs_a: np.ndarray, obs_b: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         return self.model.pairwise(self._arg(obs_a), self._arg(obs_b), aggregate=self.aggregate)
+
+    def within(self, obs_a: np.ndarray, obs_b: np.ndarray, d_max: float) -> Tuple[np.ndarray, np.ndarray]:
+        """``(D, C)`` exact where ``D < d_max``; elsewhere ``D >= d_max`` and ``C = inf``.
+
+        With the pessimistic aggregate (``"max"``), pairs that one member of the distance
+        ensemble already puts at ``d_max`` or beyond are not scored further (see
+        ``SafeGoalPolicy.pairwise``); with another aggregate, or a model without that option,
+        every pair is scored as by the call itself.
+        """
+        if self.aggregate != "max" or "within" not in inspect.signature(self.model.pairwise).parameters:
+            return self(obs_a, obs_b)
+        # blocks of 8192 pairs: about 20% faster than the default 2048 here (few pairs per block get
+        # past the first member)
+        return self.model.pairwise(self._arg(obs_a), self._arg(obs_b), aggregate=self.aggregate,
+                                   chunk_size=8192, within=d_max)
 
 
 #: sparse storage drops zeros, so kept edges carry at least these weights
@@ -347,7 +364,10 @@ class ProblemGraph:
 
     Attributes:
         observations: the node observations, ``(N + 2K, ...)``.
-        D, C: dense predicted distance and cost between every pair of nodes.
+        D, C: dense predicted distance and cost between every pair of nodes; with a critic
+            that scores only the close pairs (:meth:`NodePairwise.within`), a pair of an
+            endpoint and another node at ``d_max`` or beyond holds a lower bound of its
+            distance and an infinite cost.
         graph: the pruned graph (:class:`WaypointGraph`) the search runs on.
         n_buffer: N, the number of buffer nodes.
         c_max: the largest cost cut-off used (above the one asked for where it was relaxed).
@@ -378,15 +398,24 @@ class ProblemGraph:
 
 def attach_endpoints(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
-    starts: np.ndarray, goals: np.ndarray,
+    starts: np.ndarray, goals: np.ndarray, d_max: Optional[float] = None,
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dense ``(D, C)`` over buffer nodes + starts + goals (``pairwise`` scores the new pairs), and
-    the observations in that order."""
+    the observations in that order.
+
+    With ``d_max``, a ``pairwise`` that has a ``within(obs_a, obs_b, d_max)`` method (as
+    :class:`NodePairwise`) scores only the new pairs closer than ``d_max`` exactly; the others
+    get a distance ``>= d_max`` and an infinite cost. Every edge, proximity and nearness test of
+    the planner asks for distances below ``d_max`` (or below smaller radii), so its answers do
+    not change; the matrices of such a problem are exact only below ``d_max``.
+    """
     n, m = len(observations), 2 * len(starts)
     ends = np.concatenate([starts, goals])
-    d_ne, c_ne = pairwise(observations, ends)
-    d_en, c_en = pairwise(ends, observations)
-    d_ee, c_ee = pairwise(ends, ends)
+    within = getattr(pairwise, "within", None)
+    score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
+    d_ne, c_ne = score(observations, ends)
+    d_en, c_en = score(ends, observations)
+    d_ee, c_ee = score(ends, ends)
     D2 = np.empty((n + m, n + m))
     C2 = np.empty((n + m, n + m))
     D2[:n, :n], D2[:n, n:], D2[n:, :n], D2[n:, n:] = D, d_ne, d_en, d_ee
@@ -490,7 +519,7 @@ def build_problem_graph(
     ee = np.asarray(np.zeros((0, 2)) if exclude_edges is None else exclude_edges, dtype=np.int64).reshape(-1, 2)
     if len(ee) and (ee.min() < 0 or ee.max() >= n):
         raise ValueError(f"exclude_edges must hold pairs of buffer node ids in [0, {n}), got {ee.tolist()}")
-    D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals)
+    D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False
     keep[:, ex] = False

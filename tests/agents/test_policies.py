@@ -121,3 +121,35 @@ def test_extractor_rejects_mismatched_goal_space():
         GoalPairExtractor(bad)
     with pytest.raises(ValueError, match="encoder"):
         GoalPairExtractor(panorama_space(), encoder="transformer")
+
+
+@pytest.mark.parametrize("chunk_size", [1, 7, 1 << 20])
+def test_pairwise_within_is_exact_below_the_cutoff_and_a_lower_bound_beyond(vector_policy, chunk_size):
+    rng = np.random.default_rng(4)
+    a = rng.random((30, 2), dtype=np.float32)
+    b = rng.random((11, 2), dtype=np.float32)
+    full = vector_policy.pairwise(a, b)
+    within = float(np.median(full["distance"]))  # half the pairs on either side
+    got = vector_policy.pairwise(a, b, chunk_size=chunk_size, within=within)
+    near = full["distance"] < within
+    assert 0 < near.sum() < near.size
+    np.testing.assert_array_equal(got["distance"] < within, near)
+    for q in ("distance", "cost"):
+        np.testing.assert_allclose(got[q][near], full[q][near], rtol=1e-5, atol=1e-5)
+    # beyond the cut-off: the first member's distance where it is already past the cut-off (a
+    # lower bound of the maximum) and no cost; the exact values where only the maximum is past it
+    first = vector_policy.pairwise(a, b, aggregate="none")["distance"][0]
+    screened = first >= within
+    assert not (screened & near).any() and screened.any() and (~screened & ~near).any()
+    np.testing.assert_allclose(got["distance"][screened], first[screened], rtol=1e-5, atol=1e-5)
+    assert np.all(np.isinf(got["cost"][screened]))
+    for q in ("distance", "cost"):
+        np.testing.assert_allclose(got[q][~screened], full[q][~screened], rtol=1e-5, atol=1e-5)
+
+
+def test_pairwise_within_needs_the_maximum_of_the_distances(vector_policy):
+    x = np.zeros((3, 2), np.float32)
+    with pytest.raises(ValueError, match="within needs aggregate='max'"):
+        vector_policy.pairwise(x, x, aggregate="mean", within=3.0)
+    with pytest.raises(ValueError, match="within needs"):
+        vector_policy.pairwise(x, x, quantities=("cost",), within=3.0)

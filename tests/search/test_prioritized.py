@@ -193,3 +193,20 @@ def test_initial_order_and_plan_in_order_report_the_failed_agent():
     assert initial_order(inst) == [0, 1]
     paths, failed = plan_in_order(inst, [1, 0], [0])
     assert paths is None and failed == 0
+
+
+def test_gives_up_at_once_when_a_restart_would_repeat_the_last_attempt():
+    # agent 1 starts on its goal, node 6, the only way into agent 0's goal (node 3): it has to
+    # step aside and come back, which prioritised planning never plans (it plans each agent
+    # once); a plan exists (the brute force's sum of costs is 6)
+    n = 8
+    edges = {(u, v): 1 for u, v in [(0, 2), (0, 5), (0, 6), (1, 2), (1, 4), (2, 0), (2, 1), (2, 4), (2, 7), (3, 6),
+                                     (4, 1), (4, 2), (4, 6), (4, 7), (5, 0), (5, 7), (6, 0), (6, 3), (6, 4), (7, 2),
+                                     (7, 4), (7, 5)]}
+    starts, goals = [7, 6], [3, 6]
+    assert brute_force_soc(n, edges, starts, goals) == 6
+    adj = [[v for (u, v) in sorted(edges) if u == x] for x in range(n)]
+    res = solve_prioritized(MapfInstance(adj, starts, goals), restarts=20, joint_check_states=0)
+    # agent 0 fails when planned first: moving it to the front again would change nothing
+    assert res.status == "timeout" and "repeat the last attempt" in res.message
+    assert res.stats.hl_expanded == 1

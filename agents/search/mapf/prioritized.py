@@ -8,8 +8,10 @@ park at or near another agent's start come after it in the order (:func:`initial
 agent shut in by waiting agents is planned after them (:func:`plan_in_order`). Prioritised
 planning is incomplete: an agent may still find no path because earlier agents block it. When
 that happens the order is changed (the failed agent moves to the front) and planning starts
-again, up to ``restarts`` times. The order is a function of the instance alone, so the same
-instance gives the same plan on any machine.
+again, up to ``restarts`` times; an agent that fails although it was first in the order ends
+planning at once, since planning is deterministic and the restart would repeat the attempt.
+The order is a function of the instance alone, so the same instance gives the same plan on any
+machine.
 
 The budget is counted in work: SIPP expansions over all agents and restarts
 (``expansion_limit``); the wall-clock ``time_limit`` is only a safety net. Reaching either
@@ -145,7 +147,8 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
 
     Args:
         inst: the instance (either time model, with or without proximity).
-        restarts: how many times a failed agent may be moved to the front and planning redone.
+        restarts: how many times a failed agent may be moved to the front and planning redone
+            (never for an agent already at the front: that attempt would be repeated exactly).
         expansion_limit: SIPP expansions over the whole solve (``None``: no limit).
         time_limit: wall-clock seconds, a safety net (``None``: none).
         order: the first priority order (default :func:`initial_order`).
@@ -221,6 +224,11 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
                    else f"prioritised planning ({attempt} restarts); cost not bounded")
             return finish(CBSResult(status, full, soc, max(costs, default=0), lb, message=msg))
         assert failed is not None
+        if cur[0] == failed:
+            # planning is deterministic: the same order would fail the same way again
+            return finish(CBSResult("timeout", lower_bound=lb,
+                                    message=f"prioritised planning failed {attempt + 1} times; agent {failed} fails "
+                                            "even when planned first, so a restart would repeat the last attempt"))
         cur.remove(failed)
         cur.insert(0, failed)
     return finish(CBSResult("timeout", lower_bound=lb,

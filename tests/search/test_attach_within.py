@@ -1,0 +1,65 @@
+"""Attaching starts and goals scores only the pairs a plan can use, with the same answers.
+
+``NodePairwise.within`` skips the pairs one member of the distance ensemble already puts at
+``d_max`` or beyond (the planner's default aggregate is the ensemble's maximum, which that
+member bounds from below). The problem graphs and plans must be those of scoring every pair.
+"""
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+
+import safe_mapf_envs  # noqa: F401
+from agents import load_pretrained
+from agents.search.graph import NodePairwise
+from agents.search.mapf import Proximity, validate
+from agents.search.planner import BufferPlanner
+from agents.self_sampling import observations_at
+
+ENV = "SafeCentralObstacle-v0"
+
+
+@pytest.fixture(scope="module")
+def setting():
+    th.set_num_threads(1)
+    env = gym.make(ENV)
+    rng = np.random.default_rng(0)
+    nodes = observations_at(env, env.unwrapped.sample_states(300, rng))
+    ends = observations_at(env, env.unwrapped.sample_states(16, rng))
+    model = load_pretrained(ENV, "unconstrained")
+    planner = BufferPlanner.from_agent(model, nodes, solver="prioritized")
+    assert isinstance(planner.pairwise, NodePairwise)
+    every_pair = planner.pairwise.__call__  # a plain callable: no ``within``, every pair scored
+    full = BufferPlanner(planner.observations, planner.D, planner.C, every_pair, **planner.options())
+    return planner, full, ends[:8], ends[8:]
+
+
+def test_problem_graph_is_that_of_scoring_every_pair(setting):
+    planner, full, starts, goals = setting
+    a, b = planner.problem_graph(starts, goals), full.problem_graph(starts, goals)
+    ga, gb = a.graph.distance.tocsr(), b.graph.distance.tocsr()
+    np.testing.assert_array_equal(ga.indptr, gb.indptr)
+    np.testing.assert_array_equal(ga.indices, gb.indices)
+    np.testing.assert_allclose(ga.data, gb.data, rtol=1e-5)
+    np.testing.assert_allclose(a.graph.cost.tocsr().data, b.graph.cost.tocsr().data, rtol=1e-5, atol=1e-6)
+    short = b.D < planner.d_max
+    np.testing.assert_array_equal(a.D < planner.d_max, short)
+    np.testing.assert_allclose(a.D[short], b.D[short], rtol=1e-5)
+    assert np.all(a.D[~short] >= planner.d_max)
+    n = planner.observations.shape[0]
+    scored = np.zeros_like(short)
+    scored[:n, :n] = True  # buffer pairs come from the planner's matrices, all exact
+    assert np.isinf(a.C[~short & ~scored]).mean() > 0.5  # most endpoint pairs were skipped
+
+
+@pytest.mark.parametrize("solver", ["prioritized", "cbs"])
+def test_plans_are_those_of_scoring_every_pair(setting, solver):
+    planner, full, starts, goals = setting
+    a = planner.with_options(solver=solver).plan(starts, goals)
+    b = full.with_options(solver=solver).plan(starts, goals)
+    assert a.solved and (a.status, a.soc, a.nodes, a.depart_times) == (b.status, b.soc, b.nodes, b.depart_times)
+    dur = a.problem.graph.distance.copy()
+    dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
+    prox = Proximity(planner._proximity_matrix(a.problem.D, len(starts)), planner.proximity_radius)
+    assert validate(dur, a.problem.start_ids, a.problem.goal_ids, a.cbs.paths, time_model="durative",
+                    proximity=prox) == []
