@@ -1,5 +1,6 @@
 """Evaluation on Ray: the rows of the serial run, and a clear error without Ray."""
 import math
+import os
 import sys
 
 import numpy as np
@@ -36,10 +37,15 @@ def test_ray_rows_are_the_serial_rows_in_the_serial_order(setup):
     kwargs = dict(agent_counts=[1, 3], difficulties=["easy", "hard"], n_problems=1, seed=5, progress=False,
                   max_cycles=120)
     serial_runs, ray_runs = [], []
+    preset = "RAY_worker_niceness" in os.environ
     serial = evaluate(setup, methods, on_run=lambda r, p, e: serial_runs.append((p.index, e.steps)), **kwargs)
     try:
         on_ray = evaluate(setup, methods, ray="local", on_run=lambda r, p, e: ray_runs.append((p.index, e.steps)),
                           **kwargs)
+        if not preset:  # a local Ray's workers run at the driver's niceness, not Ray's default 15
+            worker_nice = ray.get(ray.remote(lambda: os.nice(0)).remote())
+            assert worker_nice == os.nice(0), worker_nice
+            assert "RAY_worker_niceness" not in os.environ  # set for ray.init only
     finally:
         ray.shutdown()
     assert len(serial) == 3 * 2 * 2
