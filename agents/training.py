@@ -57,7 +57,7 @@ class TrainConfig:
     disagreement_weight: float = 0.0
     """self-sampling: bonus per unit of ensemble disagreement"""
     narrow_fraction: float = 0.0
-    """self-sampling: share of candidate starts and goals drawn in narrow passages (bridge test)"""
+    """self-sampling: share of each refill's problems that cross a narrow passage, not scored by the critic"""
     oracle_band: Tuple[float, float] = (2.0, 15.0)
     """oracle sampler: band of ground-truth geodesic goal distances (world units)"""
     cost_limit: float = 10.0

@@ -45,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--n-keep", type=int, default=d.n_keep, help="self-sampling: K")
     g.add_argument("--disagreement-weight", type=float, default=d.disagreement_weight)
     g.add_argument("--narrow-fraction", type=float, default=d.narrow_fraction,
-                   help="self-sampling: share of candidate starts and goals drawn in narrow passages (doorways, "
-                        "corridors; the bridge test) instead of uniformly")
+                   help="self-sampling: share of each refill's problems that cross a narrow passage (doorway, "
+                        "corridor; start and goal on either side), kept without scoring by the critic")
     g.add_argument("--oracle-band", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.oracle_band),
                    help="oracle sampler: geodesic goal distance band (world units)")
     g = p.add_argument_group("constrained stage")
