@@ -15,6 +15,10 @@ current waypoint's observation. Rules, all from observations only:
   routes (:mod:`agents.search.dependencies`), however late they are; an agent waits on another
   for at most ``order_patience`` steps in which that one makes no progress, and never on one that
   has replanned;
+- **goal order** (optional): an agent does not set off for its goal while ``goal_order`` names
+  agents that still have to pass it (an agent parked at its goal is an immovable obstacle, and
+  one that parks in a doorway before another has gone through shuts that one out for good);
+  same patience as the plan order;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
   first, ties broken by index); the paper states this rule, we implement it. Only two agents
@@ -147,6 +151,11 @@ class WaypointController:
             critic, by a quarter step) for this many steps counts as stuck, too (``None``: off): a
             policy that mistakes one place for another (two panoramas alike) drives or hovers
             somewhere else and never stops long enough for ``stuck_window`` to see it.
+        goal_order: optional ``goal_order(agent) -> [(other, r), ...]``, asked while ``agent``
+            stands at its last waypoint: it sets off for its goal only once each ``other`` has
+            reached its target ``r`` (or arrived), since ``other``'s route passes ``agent``'s
+            goal. Asked afresh at every step (routes change when agents replan); an agent waits
+            on another for at most ``order_patience`` steps in which that one makes no progress.
     """
 
     def __init__(
@@ -170,6 +179,7 @@ class WaypointController:
         seed: Optional[int] = 0,
         order_patience: int = 40,
         progress_patience: Optional[int] = None,
+        goal_order: Optional[Callable[[str], List[Tuple[str, int]]]] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -212,6 +222,9 @@ class WaypointController:
         self._after = {a: {q: list(v) for q, v in (p.after or {}).items()} for a, p in self.plans.items()}
         #: per agent: (target it may not set off for, agent it waits on, since when, that one's index then)
         self._blocked: Dict[str, Tuple[int, str, int, int]] = {}
+        self.goal_order = goal_order
+        #: per agent: the agents it no longer waits on before parking (its patience ran out)
+        self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
         self._live: set = set(self.plans)
         self.t = 0
         self.stats = ControllerStats()
@@ -262,22 +275,37 @@ class WaypointController:
 
     def _waits_on(self, agent: str, q: int) -> Optional[str]:
         """The agent ``agent`` must wait for before setting off for its target ``q`` (``None``: it may go)."""
-        deps = self._after[agent].get(q)
-        if not deps:
-            return None
+        deps = self._after[agent].get(q, [])
         for b, r in list(deps):
             if b not in self._live or self.index.get(b, 0) > r:
                 deps.remove((b, r))  # reached (or arrived): satisfied for good
                 continue
-            seen = self._blocked.get(agent)
-            if seen is None or seen[:2] != (q, b) or self.index[b] != seen[3]:
-                self._blocked[agent] = (q, b, self.t, self.index[b])
-            elif self.t - seen[2] >= self.order_patience:  # it does not progress: stop waiting on it
+            if self._patience_over(agent, q, b):
                 deps.remove((b, r))
-                self._blocked.pop(agent, None)
+                continue
+            return b
+        if self.goal_order is None or q != len(self.plans[agent].waypoints):
+            return None
+        for b, r in self.goal_order(agent):
+            if b == agent or b not in self._live or self.index.get(b, 0) > r or b in self._gave_up[agent]:
+                continue
+            if self._patience_over(agent, q, b):
+                self._gave_up[agent].add(b)
                 continue
             return b
         return None
+
+    def _patience_over(self, agent: str, q: int, b: str) -> bool:
+        """Whether ``agent``, held at target ``q`` by ``b``, has waited ``order_patience`` steps in which
+        ``b`` reached no new target (then it stops waiting on ``b``)."""
+        seen = self._blocked.get(agent)
+        if seen is None or seen[:2] != (q, b) or self.index[b] != seen[3]:
+            self._blocked[agent] = (q, b, self.t, self.index[b])
+            return False
+        if self.t - seen[2] >= self.order_patience:  # it does not progress: stop waiting on it
+            self._blocked.pop(agent, None)
+            return True
+        return False
 
     def act(self, observations: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
         """Actions for the live agents, given each agent's current observation (the ``observation`` entry)."""
@@ -381,6 +409,7 @@ class WaypointController:
             self.index[agent] = 0
             self._after[agent] = {q: list(v) for q, v in (plan.after or {}).items()}
             self._blocked.pop(agent, None)
+            self._gave_up[agent] = set()
             self._best.pop(agent, None)
             self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
             self._thresholds[agent] = self._reach_thresholds(plan)

@@ -92,7 +92,9 @@ class SearchPolicy:
         hold: how the agents keep to the plan. ``"order"``: in the plan's order, not on the
             clock: an agent sets off for a place the plan sends another agent through first only
             once that one has got far enough (:mod:`agents.search.dependencies`; an agent that is
-            slower than planned delays the others instead of meeting them). ``"waits"`` (an early
+            slower than planned delays the others instead of meeting them), and an agent parks at
+            its goal only once the agents whose routes still pass it have gone by
+            (:meth:`_goal_blockers`). ``"waits"`` (an early
             agent waits for its planned departure time where CBS made it wait) or ``"all"`` (at
             every waypoint): on the clock. Default :func:`default_hold` of the judging model:
             ``"order"`` for panorama agents, ``"waits"`` for vector ones.
@@ -466,10 +468,11 @@ class SearchPolicy:
         self.agents = names
         self._goals = dict(goals)
         replan = self._replan_stuck if self.planner is not None and self.replan_when_stuck else None
+        goal_order = self._goal_blockers if self.hold == "order" and self.planner is not None else None
         self.controller = WaypointController(self._policy, self._distance, plans,
                                              reach_threshold=self.reach_threshold, safety_radius=self.safety_radius,
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
-                                             **self.controller_kwargs)
+                                             goal_order=goal_order, **self.controller_kwargs)
 
     def _plan(self, starts: np.ndarray, goals: np.ndarray) -> MultiAgentPlan:
         """A joint plan without the edges the memory removed; where that leaves an agent without any
@@ -513,6 +516,45 @@ class SearchPolicy:
         """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
         own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
         return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
+
+    def _goal_blockers(self, agent: str) -> List[Tuple[str, int]]:
+        """The agents whose remaining routes pass ``agent``'s goal, each with the target index it must
+        reach before ``agent`` may park there (the controller's ``goal_order``).
+
+        A leg passes the goal when one of its ends is within the planner's proximity radius of it
+        (the planner's own conflict, on the routes as they are now: agents that replanned are in
+        no plan order), or when the goal lies on the way: going through it is at most that radius
+        longer than the leg (predicted steps), which the planner does not see.
+        """
+        assert self.planner is not None and self.controller is not None
+        if agent not in self._route_graph:
+            return []
+        radius = float(self.planner.proximity_radius or 0.0)
+        problem, g, _ = self._route_graph[agent]
+        out: List[Tuple[str, int]] = []
+        for b in self.agents:
+            if b == agent or b not in self._route_graph:
+                continue
+            pb, gb, _ = self._route_graph[b]
+            route = self.routes.get(b, [])
+            k = self.controller.index.get(b, 0)
+            nodes = list(route) + [gb]
+            # the nodes of b's route as ids of agent's problem graph (buffer ids are shared;
+            # b's own endpoints only when both were planned together)
+            same = pb is problem
+            ids = [u if (u < problem.n_buffer or same) else -1 for u in nodes]
+            last = -1
+            for q in range(max(k, 1), len(nodes)):
+                u, v = ids[q - 1], ids[q]
+                if q == len(route) and v >= 0 and min(problem.D[v, g], problem.D[g, v]) < radius:
+                    continue  # goals side by side: both park (the planner lets them)
+                if v >= 0 and min(problem.D[v, g], problem.D[g, v]) < radius:
+                    last = q + 1 if q + 1 < len(nodes) else q  # it must leave the place, not get there
+                elif u >= 0 and v >= 0 and problem.D[u, g] + problem.D[g, v] <= problem.D[u, v] + radius:
+                    last = q
+            if last >= 0:
+                out.append((b, last))
+        return out
 
     def _parked_nodes(self, agent: str) -> List[int]:
         """Buffer nodes within ``ban_radius`` predicted steps of the goals of the agents that have arrived

@@ -203,3 +203,65 @@ def test_panorama_agents_keep_the_plans_order_and_vector_agents_its_clock(stand_
     assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="order").hold == "order"
     with pytest.raises(ValueError, match="hold must be"):
         SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="never")
+
+
+def test_an_agent_parks_only_after_the_agents_whose_routes_pass_its_goal():
+    """goal_order: a stands at its last waypoint; b's route still passes a's goal, so a waits until b has
+    reached its target 2; with a b that does not move, a parks after order_patience steps and does not
+    wait on b again."""
+    plans = {"a": AgentPlan(np.array([[0.0, 0.0]]), np.array([3.0, 0.0]), starts_at_first=True),
+             "b": AgentPlan(np.array([[3.0, 5.0], [3.0, 1.0], [3.0, -5.0]]), np.array([3.0, -9.0]),
+                            starts_at_first=True)}
+    asked = []
+
+    def goal_order(agent):
+        asked.append(agent)
+        return [("b", 2)] if agent == "a" else []
+
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=5, goal_order=goal_order)
+    a0, b = np.array([0.0, 0.0]), [np.array([3.0, 5.0]), np.array([3.0, 1.0]), np.array([3.0, -5.0])]
+    c.act({"a": a0, "b": b[0]})
+    assert c.index["a"] == 0 and c.stats.holding["a"] == "wait:b" and "a" in asked
+    c.act({"a": a0, "b": b[1]})  # b is on a's goal now: a still waits
+    assert c.index["a"] == 0 and c.index["b"] == 2
+    c.act({"a": a0, "b": b[2]})  # b has passed
+    assert c.index["a"] == 1 and c.stats.holding["a"] is None
+    # a b that stays where it is: a gives up on it after the patience, for good
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=5, goal_order=goal_order)
+    waited = 0
+    while c.index["a"] == 0 and waited < 20:
+        c.act({"a": a0, "b": b[0] + [0.0, 3.0]})
+        waited += 1
+    assert 5 <= waited <= 7 and c.index["a"] == 1 and c._gave_up["a"] == {"b"}
+    # without goal_order (the default) a parks at once
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c.act({"a": a0, "b": b[0]})
+    assert c.index["a"] == 1
+
+
+def test_the_agents_that_must_pass_a_goal_are_read_off_their_remaining_routes(stand_in_models, nodes):
+    """SearchPolicy's goal order on a hand-made problem graph of 6 nodes: b's leg 1 -> 2 runs past a's
+    goal (5) without either end being near it; c's route ends near it; d's route stays clear; b's target
+    index moves on as it drives."""
+    from types import SimpleNamespace
+
+    agent = stand_in_models["constrained"]
+    policy = SearchPolicy.from_models(agent, agent, nodes[:20], d_max=12.0, hold="order")
+    far = 9.0
+    D = np.full((7, 7), far)
+    np.fill_diagonal(D, 0.5)
+    D[1, 2] = D[2, 1] = 4.0  # the leg 1 -> 2
+    D[1, 5] = D[5, 1] = D[5, 2] = D[2, 5] = 2.7  # a's goal 5 lies on its way: 5.4 <= 4 + radius
+    D[3, 5] = D[5, 3] = 1.0  # node 3 is near a's goal
+    problem = SimpleNamespace(D=D, n_buffer=5)
+    policy.planner.proximity_radius = 1.5
+    policy.agents = ["a", "b", "c", "d"]
+    policy.routes = {"a": [0], "b": [0, 1, 2], "c": [0, 3], "d": [0, 4]}
+    policy._route_graph = {a: (problem, g, 0) for a, g in zip(policy.agents, [5, 6, 6, 6])}
+    policy.controller = SimpleNamespace(index={"a": 1, "b": 0, "c": 1, "d": 0})
+    # b must reach target 2 (the end of the leg that passes the goal); c must leave node 3 (its goal, 3)
+    assert policy._goal_blockers("a") == [("b", 2), ("c", 2)]
+    policy.controller.index["b"] = 3  # b heads for its own goal now, past a's
+    assert policy._goal_blockers("a") == [("c", 2)]
