@@ -50,11 +50,13 @@ def init_ray(address: Optional[str] = None, num_cpus: Optional[int] = None) -> A
             # Ray starts its workers at niceness 15, so on a machine running anything else they get
             # what is left (measured: a quarter of a core each beside two other jobs on 2 cores);
             # a local evaluation is the user's own foreground job: its workers run as the driver
-            # does, unless RAY_worker_niceness says otherwise
+            # does, unless RAY_worker_niceness says otherwise. Ray adds it to the niceness the
+            # workers inherit from the driver, so 0 keeps the driver's (its own niceness would
+            # count it twice: a driver at 10 had workers at 19)
             key = "RAY_worker_niceness"
             preset = key in os.environ
             if not preset:
-                os.environ[key] = str(os.nice(0))
+                os.environ[key] = "0"
             try:
                 ray.init(num_cpus=num_cpus or os.cpu_count() or 1, **kwargs)
             finally:
