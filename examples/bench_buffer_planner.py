@@ -46,6 +46,7 @@ from baselines.evaluation import EvaluationSetup, make_problems
 SOLVER_OPTIONS = {
     "auto": dict(solver="auto"),
     "prioritized": dict(solver="prioritized"),
+    "lns": dict(solver="lns"),
     "ecbs": dict(solver="cbs", suboptimality=1.1),
     "cbs": dict(solver="cbs", suboptimality=1.0),
     "cbs-unit": dict(solver="cbs", suboptimality=1.0, time_model="unit"),

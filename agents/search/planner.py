@@ -46,13 +46,15 @@ from .controller import AgentPlan
 from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
+from .mapf.lns import solve_lns
 from .mapf.prioritized import solve_prioritized
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
-SOLVERS = ("auto", "cbs", "prioritized")
-#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above.
+SOLVERS = ("auto", "cbs", "prioritized", "lns")
+#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
+#: large-neighbourhood repair where either runs out of its budget).
 AUTO_SEARCH_AGENTS = 20
 #: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
 #: buffer graph on an idle machine
@@ -60,6 +62,8 @@ DEFAULT_EXPANSION_LIMIT = 50_000
 #: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
 #: 150,000 to 190,000 safe-interval expansions
 DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_000
+#: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
+DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 
 
 @dataclass
@@ -250,6 +254,8 @@ class BufferPlanner:
         solver: str = "auto",
         expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
         prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
+        repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
+        repair_seed: int = 0,
         time_limit: float = 30.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
@@ -281,15 +287,22 @@ class BufferPlanner:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         for name, lim in (("expansion_limit", expansion_limit),
-                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent)):
-            if lim is not None and not (isinstance(lim, (int, np.integer)) and lim >= 1):
+                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent),
+                          ("repair_expansions_per_agent", repair_expansions_per_agent)):
+            if lim is not None and not (isinstance(lim, (int, np.integer)) and not isinstance(lim, bool)
+                                        and lim >= 1):
                 raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
+        if isinstance(repair_seed, bool) or not isinstance(repair_seed, (int, np.integer)):
+            raise ValueError(f"repair_seed must be an integer, got {repair_seed!r}")
         if not time_limit > 0:
             raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
         self.solver = solver
         self.expansion_limit = None if expansion_limit is None else int(expansion_limit)
         self.prioritized_expansions_per_agent = (None if prioritized_expansions_per_agent is None
                                                  else int(prioritized_expansions_per_agent))
+        self.repair_expansions_per_agent = (None if repair_expansions_per_agent is None
+                                            else int(repair_expansions_per_agent))
+        self.repair_seed = int(repair_seed)
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
@@ -325,6 +338,7 @@ class BufferPlanner:
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
             solver=self.solver, expansion_limit=self.expansion_limit,
             prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
+            repair_expansions_per_agent=self.repair_expansions_per_agent, repair_seed=self.repair_seed,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
             max_edges=self.max_edges)
@@ -415,21 +429,35 @@ class BufferPlanner:
         prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
         inst = MapfInstance(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox)
         solver = self.solver
-        if solver == "auto":
+        auto = solver == "auto"
+        if auto:
             solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
+        if solver == "lns":
+            return self._repair(inst), "lns"
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
             per_agent = self.prioritized_expansions_per_agent
             budget = None if per_agent is None else per_agent * k
-            return solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit), solver
-        res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
-                        expansion_limit=self.expansion_limit).solve()
-        fb = self.fallback_suboptimality
-        if res.status == "timeout" and fb is not None and fb > self.suboptimality:
-            res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
+            res = solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit)
+        else:
+            res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
                             expansion_limit=self.expansion_limit).solve()
-        return res, "cbs"
+            fb = self.fallback_suboptimality
+            if res.status == "timeout" and fb is not None and fb > self.suboptimality:
+                res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
+                                expansion_limit=self.expansion_limit).solve()
+        if auto and res.status == "timeout":
+            repaired = self._repair(inst)
+            repaired.message = f"{repaired.message} (after {solver}: {res.message})"
+            return repaired, "lns"
+        return res, solver
+
+    def _repair(self, inst: MapfInstance) -> CBSResult:
+        """The large-neighbourhood repair with this planner's budget and seed."""
+        per_agent = self.repair_expansions_per_agent
+        budget = None if per_agent is None else per_agent * inst.n_agents
+        return solve_lns(inst, expansion_limit=budget, time_limit=self.time_limit, seed=self.repair_seed)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

@@ -1,0 +1,599 @@
+"""Large-neighbourhood repair: many agents where prioritised planning gives up.
+
+Prioritised planning (:mod:`agents.search.mapf.prioritized`) plans each agent once around the
+agents before it; in a dense crowd an agent may find no path at all, and the solve fails. The
+repair here, in the spirit of "MAPF-LNS2: Fast Repairing for Multi-Agent Path Finding via Large
+Neighborhood Search" (Li et al., AAAI 2022), never lets an agent fail: it accepts conflicts and
+removes them afterwards.
+
+1. **Initial plan**: prioritised planning, where an agent that finds no conflict-free path gets
+   the path with the fewest conflicts instead (:func:`soft_sipp`).
+2. **Repair**: while some agents conflict, pick a *neighbourhood* of a few agents (an agent in a
+   conflict, the agents it conflicts with and theirs, then agents whose paths come near theirs),
+   drop their paths and plan them again one by one, in random order, each on its path with the
+   fewest conflicts against all the other paths; keep the new paths if the number of pairs of
+   agents in conflict did not grow, else put the old ones back.
+
+:class:`ConflictTable` holds the planned paths and answers which agents a path, a move or a wait
+conflicts with, with the conflict rules of :func:`~agents.search.mapf.validate.validate` (durative
+edges occupy both ends, proximity through the instance's near lists, agents parked at their goal
+for good, swaps under unit time). Every budget is counted in expansions, and the neighbourhoods
+are drawn from a generator seeded by ``seed``, so a solve is a function of the instance, the
+options and the seed; the wall-clock ``time_limit`` is only a safety net.
+"""
+from __future__ import annotations
+
+import heapq
+import random
+from bisect import bisect_right
+from collections import deque
+from typing import Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
+
+from .instance import UNREACHABLE, MapfInstance
+from .prioritized import (
+    SolveRun,
+    check_common_options,
+    default_start_hold,
+    initial_order,
+    no_plan_reason,
+    plan_in_order,
+    plan_result,
+)
+from .result import CBSResult
+from .sipp import FOREVER, BudgetExceeded, Events
+from .solver import DEFAULT_JOINT_CHECK_STATES
+
+#: default expansions of one repair solve (initial plan and repair together)
+DEFAULT_REPAIR_EXPANSION_LIMIT = 2_000_000
+#: default number of agents re-planned together
+DEFAULT_NEIGHBORHOOD_SIZE = 4
+
+_EMPTY: FrozenSet[int] = frozenset()
+#: A node's timeline cut into maximal ranges with the same agents: ``(firsts, lasts, agents)``.
+Segments = Tuple[List[int], List[int], List[FrozenSet[int]]]
+#: The segments of a node no agent ever occupies (shared).
+_FREE: Segments = ([0], [FOREVER], [_EMPTY])
+
+
+def occupancy(events: Sequence[Tuple[int, int]], unit: bool) -> Tuple[List[Tuple[int, int, int]],
+                                                                      List[Tuple[int, int, int]]]:
+    """What an agent following ``events`` (then parked at its last node for good) occupies.
+
+    Returns ``(spans, moves)``: ``spans`` are ``(node, first, last)`` inclusive ranges of steps
+    (durative: during step ``[k, k + 1)`` the node waited at, or both ends of the edge being
+    traversed; unit: the node at time ``k``); ``moves`` are the unit-time moves ``(u, v, t)``
+    (leaving ``u`` at ``t``), which conflict with a move ``(v, u, t)`` (a swap).
+    """
+    spans: List[Tuple[int, int, int]] = []
+    moves: List[Tuple[int, int, int]] = []
+    for (u, t0), (v, t1) in zip(events, events[1:]):
+        spans.append((u, t0, t1 - 1))
+        if u != v:
+            if unit:
+                moves.append((u, v, t0))
+            else:
+                spans.append((v, t0, t1 - 1))
+    g, t_end = events[-1]
+    spans.append((g, t_end, FOREVER))
+    return spans, moves
+
+
+class ConflictTable:
+    """The planned paths of an instance's agents, and which agents a path or a move conflicts with.
+
+    Every occupied range of steps is recorded at its node and at the nodes near it, tagged with
+    its agent, so that an agent at a node conflicts with the agents recorded there at the same
+    step. :meth:`segments` cuts a node's timeline where the set of agents there changes;
+    :func:`soft_sipp` searches over those segments.
+
+    Args:
+        inst: the instance (graph, time model, proximity).
+    """
+
+    def __init__(self, inst: MapfInstance) -> None:
+        self.inst = inst
+        self.unit = inst.unit
+        n = inst.n_nodes
+        #: per node, occupied inclusive ranges ``(first, last, agent, is_hold)``
+        self._entries: List[List[Tuple[int, int, int, bool]]] = [[] for _ in range(n)]
+        self._segments: List[Optional[Segments]] = [None] * n
+        self._touched: Dict[Tuple[int, bool], Set[int]] = {}
+        #: unit time: ``(u, v) -> {t: agents leaving u for v at t}``
+        self._moves: Dict[Tuple[int, int], Dict[int, Set[int]]] = {}
+        self._agent_moves: Dict[int, List[Tuple[int, int, int]]] = {}
+        #: the paths in the table, by agent
+        self.paths: Dict[int, Events] = {}
+        near = inst.near
+        self._reach: List[Tuple[int, ...]] = [
+            tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
+        #: per node, its moves ``(v, duration)`` (waiting left out)
+        self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
+
+    # ------------------------------------------------------------------ contents
+    def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
+        self._touched.setdefault((agent, hold), set()).add(node)
+        entry = (first, last, agent, hold)
+        for x in self._reach[node]:
+            self._entries[x].append(entry)
+            self._segments[x] = None
+
+    def _drop(self, agent: int, hold: bool) -> None:
+        for node in self._touched.pop((agent, hold), ()):
+            for x in self._reach[node]:
+                self._entries[x] = [e for e in self._entries[x] if e[2] != agent or e[3] != hold]
+                self._segments[x] = None
+
+    def hold(self, agent: int, node: int, last: int) -> None:
+        """Record ``agent`` at ``node`` during ``0 .. last`` (an agent waiting at its start before it
+        is planned), until :meth:`release`."""
+        self._block(agent, True, node, 0, last)
+
+    def release(self, agent: int) -> None:
+        """Drop what :meth:`hold` recorded for ``agent``."""
+        self._drop(agent, True)
+
+    def reserve(self, agent: int, events: Events) -> None:
+        """Record ``agent``'s path (``[(node, time), ...]``, then parked at its last node)."""
+        if agent in self.paths:
+            raise ValueError(f"agent {agent} already has a path in the table")
+        self.paths[agent] = events
+        spans, moves = occupancy(events, self.unit)
+        for node, first, last in spans:
+            self._block(agent, False, node, first, last)
+        for u, v, t in moves:
+            self._moves.setdefault((u, v), {}).setdefault(t, set()).add(agent)
+        self._agent_moves[agent] = moves
+
+    def remove(self, agent: int) -> Events:
+        """Drop ``agent``'s path from the table and return it."""
+        events = self.paths.pop(agent)
+        self._drop(agent, False)
+        for u, v, t in self._agent_moves.pop(agent):
+            at = self._moves[(u, v)]
+            at[t].discard(agent)
+            if not at[t]:
+                del at[t]
+            if not at:
+                del self._moves[(u, v)]
+        return events
+
+    # ------------------------------------------------------------------ queries
+    def agents_at(self, node: int) -> Set[int]:
+        """The agents recorded at ``node`` (or near it) at any time."""
+        return {e[2] for e in self._entries[node]}
+
+    def segments(self, node: int) -> Segments:
+        """``node``'s timeline cut into maximal ranges in which the same agents are there:
+        ``(firsts, lasts, agents)``, the first range starting at 0, the last one ending at
+        ``FOREVER``."""
+        seg = self._segments[node]
+        if seg is not None:
+            return seg
+        entries = self._entries[node]
+        if not entries:
+            self._segments[node] = _FREE
+            return _FREE
+        changes: List[Tuple[int, int, int]] = []
+        for first, last, agent, _ in entries:
+            changes.append((first, 1, agent))
+            if last < FOREVER:
+                changes.append((last + 1, -1, agent))
+        changes.sort()
+        count: Dict[int, int] = {}
+        firsts: List[int] = []
+        lasts: List[int] = []
+        sets: List[FrozenSet[int]] = []
+        cur_first, cur = 0, _EMPTY
+        i, n_changes = 0, len(changes)
+        while i < n_changes:
+            t = changes[i][0]
+            while i < n_changes and changes[i][0] == t:
+                _, delta, agent = changes[i]
+                count[agent] = count.get(agent, 0) + delta
+                i += 1
+            now = frozenset(a for a, c in count.items() if c > 0)
+            if now != cur:
+                if t > cur_first:
+                    firsts.append(cur_first)
+                    lasts.append(t - 1)
+                    sets.append(cur)
+                cur_first, cur = t, now
+        firsts.append(cur_first)
+        lasts.append(FOREVER)
+        sets.append(cur)
+        seg = (firsts, lasts, sets)
+        self._segments[node] = seg
+        return seg
+
+    def conflicts(self, events: Events, agent: Optional[int] = None) -> Set[int]:
+        """The agents in the table (other than ``agent``) that an agent following ``events``
+        (then parked at its last node) would conflict with, as
+        :func:`~agents.search.mapf.validate.validate` counts conflicts."""
+        spans, moves = occupancy(events, self.unit)
+        return self._met(spans, moves, agent)
+
+    def move_conflicts(self, u: int, v: int, t: int) -> Set[int]:
+        """The agents that a move ``u -> v`` leaving at ``t`` (a wait if ``u == v``) conflicts
+        with: during the move (durative: at both ends over its duration; unit: a swap) and on
+        arrival at ``v``. Raises ``ValueError`` if there is no such edge."""
+        d = self.inst.duration(u, v)
+        if d is None:
+            raise ValueError(f"no edge {u} -> {v}")
+        if self.unit:
+            return self._met([(v, t + 1, t + 1)], [(u, v, t)] if u != v else [], None)
+        return self._met([(u, t, t + d - 1), (v, t, t + d)], [], None)
+
+    def _met(self, spans: List[Tuple[int, int, int]], moves: List[Tuple[int, int, int]],
+             agent: Optional[int]) -> Set[int]:
+        found: Set[int] = set()
+        for node, lo, hi in spans:
+            for first, last, other, _ in self._entries[node]:
+                if first <= hi and last >= lo:
+                    found.add(other)
+        for u, v, t in moves:
+            found |= self._moves.get((v, u), {}).get(t, set())
+        if agent is not None:
+            found.discard(agent)
+        return found
+
+
+# ---------------------------------------------------------------------- low level
+def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Optional[int] = None,
+              counter: Optional[List[int]] = None, limit: Optional[int] = None) -> Optional[Events]:
+    """The path of ``agent`` that conflicts with the fewest agents of ``table``, then the earliest.
+
+    A best-first search over ``(node, segment)`` states, where a node's segments are the maximal
+    ranges of time in which the same agents of ``table`` are there (:meth:`ConflictTable.segments`):
+    safe-interval path planning (:func:`~agents.search.mapf.sipp.sipp`) with every range allowed
+    at a price. A label holds its arrival time and the set of agents its path has met; it is
+    kept unless another label of its state arrived no later having met a subset of its agents.
+    Labels are expanded fewest agents first, then by arrival plus the true distance to the goal;
+    arriving at the goal adds the agents that come to the goal later (the agent stays there).
+    So the path returned conflicts with the fewest agents (as
+    :meth:`ConflictTable.conflicts` counts them) and, among those, arrives earliest; where a
+    conflict-free path exists it arrives when :func:`~agents.search.mapf.sipp.sipp`'s does.
+
+    ``counter`` (a one-element list) accumulates expansions; past ``budget`` the search raises
+    :class:`~agents.search.mapf.sipp.BudgetExceeded`; past ``limit`` expansions of this call it
+    returns ``None``, as when the goal cannot be reached at all.
+    """
+    s, g = inst.starts[agent], inst.goals[agent]
+    h = inst.h[agent]
+    if h[s] >= UNREACHABLE:
+        return None
+    unit = table.unit
+    segments = table.segments
+    cache = table._segments  # filled in by ``segments``
+    out = table.out
+    moves = table._moves
+    N = inst.n_nodes
+    count = counter if counter is not None else [0]
+    stop = None if limit is None else count[0] + limit
+    ga, _, gs = segments(g)
+    later_at_goal: List[FrozenSet[int]] = [_EMPTY] * len(ga)  # agents at the goal after each segment
+    later: FrozenSet[int] = _EMPTY
+    for j in range(len(ga) - 1, -1, -1):
+        later_at_goal[j] = later
+        later = later | gs[j]
+    # labels, in parallel lists
+    l_node: List[int] = []
+    l_seg: List[int] = []
+    l_met: List[FrozenSet[int]] = []
+    l_t: List[int] = []
+    l_parent: List[int] = []
+    l_dep: List[int] = []
+    l_wait: List[bool] = []
+    alive: List[bool] = []
+    fronts: Dict[int, List[int]] = {}
+    heap: List[Tuple[int, int, int, int, int]] = []
+    push, pop = heapq.heappush, heapq.heappop
+
+    def add(node: int, j: int, met: FrozenSet[int], t: int, parent: int, dep: int, wait: bool) -> None:
+        code = j * N + node
+        front = fronts.get(code)
+        if front is None:
+            front = fronts[code] = []
+        elif front:
+            c = len(met)
+            for x in front:
+                if l_t[x] <= t and len(l_met[x]) <= c:
+                    return
+            kept = []
+            for x in front:
+                if t <= l_t[x] and c <= len(l_met[x]):
+                    alive[x] = False
+                else:
+                    kept.append(x)
+            front[:] = kept
+        lid = len(l_node)
+        l_node.append(node)
+        l_seg.append(j)
+        l_met.append(met)
+        l_t.append(t)
+        l_parent.append(parent)
+        l_dep.append(dep)
+        l_wait.append(wait)
+        alive.append(True)
+        front.append(lid)
+        push(heap, (len(met), t + h[node], -t, 1, lid))
+
+    add(s, 0, segments(s)[2][0], 0, -1, 0, False)
+    while heap:
+        _, _, _, kind, lid = pop(heap)
+        if kind == 0:
+            return _soft_events(lid, l_node, l_t, l_parent, l_dep, l_wait)
+        if not alive[lid]:
+            continue
+        count[0] += 1
+        if budget is not None and count[0] > budget:
+            raise BudgetExceeded
+        if stop is not None and count[0] > stop:
+            return None
+        u, j, t_u, met = l_node[lid], l_seg[lid], l_t[lid], l_met[lid]
+        seg_u = cache[u]
+        if seg_u is None:
+            seg_u = segments(u)
+        ua, ub, us = seg_u
+        b_u = ub[j]
+        if u == g and not l_wait[lid]:  # park here for good
+            push(heap, (len(met | later_at_goal[j]), t_u, -t_u, 0, lid))
+        if b_u < FOREVER:  # wait into u's next segment
+            add(u, j + 1, met | us[j + 1], b_u + 1, lid, 0, True)
+        n_u = len(ua)
+        c_met = len(met)
+        for v, d in out[u]:
+            if h[v] >= UNREACHABLE:
+                continue
+            seg_v = cache[v]
+            if seg_v is None:
+                seg_v = segments(v)
+            va, vb, vs = seg_v
+            n_v = len(va)
+            # departing later than the earliest candidate pays off only by meeting fewer agents
+            # (kept only if it meets fewer than every earlier one), or by meeting none (every
+            # such arrival is kept, as safe-interval path planning keeps each safe interval)
+            fewest = FOREVER
+            if unit:
+                # at v at t + 1 for a departure t in t_u .. b_u: what it meets changes with v's
+                # segment at t + 1 and with swaps
+                swaps = moves.get((v, u))
+                cands = {t_u}
+                jv = 0 if n_v == 1 else bisect_right(va, t_u + 1) - 1
+                for x in range(jv + 1, n_v):
+                    if va[x] - 1 > b_u:
+                        break
+                    cands.add(va[x] - 1)
+                if swaps:
+                    cands.update(x + 1 for x in swaps if t_u <= x < b_u)
+                for t in sorted(cands):
+                    jt = 0 if n_v == 1 else bisect_right(va, t + 1) - 1
+                    new = vs[jt]
+                    if swaps and t in swaps:
+                        new = new | swaps[t]
+                    new = met if new <= met else met | new
+                    cn = len(new)
+                    if cn == c_met or cn < fewest:
+                        add(v, jt, new, t + 1, lid, t, False)
+                        fewest = min(fewest, cn)
+                continue
+            # durative: during the move u and v are occupied over steps t .. t + d - 1, then v
+            # from t + d on; what it meets changes where one of v's segments leaves that window
+            if n_v == 1 and vs[0] <= met and t_u + d - 1 <= b_u:
+                add(v, 0, met, t_u + d, lid, t_u, False)
+                continue
+            jv = 0 if n_v == 1 else bisect_right(va, t_u) - 1
+            t = t_u
+            while True:
+                arr = t + d
+                k = jv
+                new = met | vs[k]
+                while k + 1 < n_v and va[k + 1] <= arr:
+                    k += 1
+                    new = new | vs[k]
+                if arr - 1 > b_u:  # still leaving u after its segment ends
+                    x = j + 1
+                    while x < n_u and ua[x] <= arr - 1:
+                        new = new | us[x]
+                        x += 1
+                cn = len(new)
+                if cn == c_met or cn < fewest:
+                    add(v, k, new, arr, lid, t, False)
+                    if cn < fewest:
+                        fewest = cn
+                e = vb[jv]
+                if e >= b_u:
+                    break
+                t = e + 1
+                jv += 1
+    return None
+
+
+def _soft_events(lid: int, l_node: List[int], l_t: List[int], l_parent: List[int], l_dep: List[int],
+                 l_wait: List[bool]) -> Events:
+    """Rebuild ``[(node, time), ...]`` from a label: each arrival, and the departure after a wait."""
+    chain = []
+    while lid >= 0:
+        chain.append(lid)
+        lid = l_parent[lid]
+    chain.reverse()
+    events: Events = [(l_node[chain[0]], 0)]
+    for x in chain[1:]:
+        if l_wait[x]:
+            continue
+        u, t_last = events[-1]
+        if l_dep[x] > t_last:
+            events.append((u, l_dep[x]))
+        events.append((l_node[x], l_t[x]))
+    return events
+
+
+# ---------------------------------------------------------------------- repair
+def direct_path(inst: MapfInstance, agent: int) -> Events:
+    """``agent``'s shortest timed path when alone (first successor on a shortest path at each node)."""
+    h = inst.h[agent]
+    u, t = inst.starts[agent], 0
+    events: Events = [(u, 0)]
+    unit = inst.unit
+    while h[u] > 0:
+        for v, d in inst.succ_d[u][1:]:
+            step = 1 if unit else d
+            if h[v] + step == h[u]:
+                u, t = v, t + step
+                events.append((u, t))
+                break
+        else:  # not on a shortest path: cannot happen with true distances
+            raise AssertionError(f"no shortest-path successor of node {u} for agent {agent}")
+    return events
+
+
+def _neighbourhood(rng: random.Random, inst: MapfInstance, conf: List[Set[int]], table: ConflictTable,
+                   size: int) -> List[int]:
+    """A few agents to re-plan together: an agent drawn among those in a conflict, the agents it
+    conflicts with and theirs (breadth first), then the agents in the way of their shortest
+    paths (those that the path each would take alone meets), then agents whose paths come near."""
+    conflicted = [i for i, c in enumerate(conf) if c]
+    first = rng.choice(conflicted)
+    chosen = [first]
+    seen = {first}
+    frontier = deque([first])
+    while frontier and len(chosen) < size:
+        x = frontier.popleft()
+        others = sorted(conf[x] - seen)
+        rng.shuffle(others)
+        for y in others[:size - len(chosen)]:
+            seen.add(y)
+            chosen.append(y)
+            frontier.append(y)
+    for pool in ("in the way", "nearby"):
+        if len(chosen) >= size:
+            break
+        found: Set[int] = set()
+        for x in chosen:
+            if pool == "in the way":
+                found |= table.conflicts(direct_path(inst, x), x)
+            else:
+                for node in {u for u, _ in table.paths[x]}:
+                    found |= table.agents_at(node)
+        extra = sorted(found - seen)
+        rng.shuffle(extra)
+        extra = extra[:size - len(chosen)]
+        chosen.extend(extra)
+        seen.update(extra)
+    return chosen
+
+
+def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_REPAIR_EXPANSION_LIMIT,
+              time_limit: Optional[float] = None, seed: int = 0,
+              neighborhood_size: int = DEFAULT_NEIGHBORHOOD_SIZE, call_limit: Optional[int] = None,
+              order: Optional[Sequence[int]] = None, start_hold: Optional[int] = None,
+              joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
+    """Large-neighbourhood repair of a prioritised plan that may hold conflicts; a :class:`CBSResult`.
+
+    Args:
+        inst: the instance (either time model, with or without proximity).
+        expansion_limit: search expansions over the whole solve, the initial plan included
+            (``None``: no limit); reaching it ends the solve with status ``"timeout"``.
+        time_limit: wall-clock seconds, a safety net (``None``: none).
+        seed: seeds the draw of the neighbourhoods and of the order in which their agents are
+            re-planned (the same seed, the same plan).
+        neighborhood_size: how many agents are re-planned together (at least 1).
+        call_limit: expansions of one agent's search (:func:`soft_sipp`) in the repair; a search
+            that passes it leaves that neighbourhood as it was (``None``: no limit).
+        order: the priority order of the initial plan (default
+            :func:`~agents.search.mapf.prioritized.initial_order`).
+        start_hold: as for :func:`~agents.search.mapf.prioritized.solve_prioritized`.
+        joint_check_states: as for :func:`~agents.search.mapf.prioritized.solve_prioritized`: a
+            small impossible part of the instance is reported ``"infeasible"`` before searching.
+
+    Returns:
+        status ``"suboptimal"`` (or ``"optimal"`` where the sum of costs equals the lower bound)
+        with conflict-free paths, ``"timeout"`` (the message says which limit, and how many
+        pairs of agents were still in conflict), or ``"infeasible"`` when some agent's goal
+        cannot be reached from its start even alone, or the joint check proves that no plan
+        exists.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    if isinstance(neighborhood_size, bool) or not isinstance(neighborhood_size, int) or neighborhood_size < 1:
+        raise ValueError(f"neighborhood_size must be an integer >= 1, got {neighborhood_size!r}")
+    if call_limit is not None and not (isinstance(call_limit, int) and call_limit >= 1):
+        raise ValueError(f"call_limit must be an integer >= 1 or None, got {call_limit!r}")
+    if start_hold is None:
+        start_hold = default_start_hold(inst)
+    if start_hold < 0:
+        raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
+    check_common_options(expansion_limit, time_limit, joint_check_states)
+    run = SolveRun(expansion_limit, time_limit)
+    k = inst.n_agents
+    reason = no_plan_reason(inst, joint_check_states)
+    if reason is not None:
+        return run.finish(inst, CBSResult("infeasible", message=reason))
+    first = list(order) if order is not None else initial_order(inst)
+    if sorted(first) != list(range(k)):
+        raise ValueError(f"order must be a permutation of the {k} agents")
+    lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
+    rng = random.Random(seed)
+    table = ConflictTable(inst)
+    conf: List[Set[int]] = [set() for _ in range(k)]
+    stats = run.stats
+    phase = "initial plan"
+    pairs = 0
+    try:
+        paths, failed = plan_in_order(inst, first, run.counter, expansion_limit, run.deadline, start_hold,
+                                      soft=table)
+        if paths is None:  # only a soft search past its limit fails, and there is none here
+            raise AssertionError(f"agent {failed} got no path")
+        for i in range(k):
+            conf[i] = table.conflicts(table.paths[i], i)
+        pairs = sum(len(c) for c in conf) // 2
+        stats.hl_generated = pairs  # conflicting pairs of the initial plan
+        phase = "repair"
+        while pairs:
+            run.check_limits()
+            stats.hl_expanded += 1
+            group = _neighbourhood(rng, inst, conf, table, neighborhood_size)
+            before = {frozenset((i, j)) for i in group for j in conf[i]}
+            old = {i: table.remove(i) for i in group}
+            old_conf = {i: set(conf[i]) for i in group}
+            for i in group:
+                for j in conf[i]:
+                    conf[j].discard(i)
+                conf[i] = set()
+            rng.shuffle(group)
+            new_conf: Dict[int, Set[int]] = {}
+            done = True
+            for i in group:
+                p = soft_sipp(inst, i, table, expansion_limit, run.counter, call_limit)
+                if p is None:
+                    done = False
+                    break
+                new_conf[i] = table.conflicts(p, i)
+                table.reserve(i, p)
+            after = sum(len(c) for c in new_conf.values())
+            if done and after <= len(before):
+                for i, c in new_conf.items():
+                    conf[i] = c
+                    for j in c:
+                        conf[j].add(i)
+                pairs += after - len(before)
+                stats.ll_calls += 1  # neighbourhoods kept
+            else:
+                for i in new_conf:
+                    table.remove(i)
+                for i in group:
+                    table.reserve(i, old[i])
+                    conf[i] = old_conf[i]
+                    for j in conf[i]:
+                        conf[j].add(i)
+    except BudgetExceeded:
+        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+            f"expansion limit of {expansion_limit} reached (large-neighbourhood repair, {phase}"
+            f"{'' if phase == 'initial plan' else f'; {pairs} pairs of agents still in conflict'})")))
+    except TimeoutError:
+        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+            f"time limit of {time_limit:g} s reached (large-neighbourhood repair, {phase}"
+            f"{'' if phase == 'initial plan' else f'; {pairs} pairs of agents still in conflict'})")))
+    full = [table.paths[i] for i in range(k)]
+    return run.finish(inst, plan_result(full, lb, (
+        f"large-neighbourhood repair: {stats.hl_generated} pairs of agents in conflict in the initial plan, "
+        f"{stats.hl_expanded} neighbourhoods re-planned; cost not bounded")))
