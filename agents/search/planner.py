@@ -12,7 +12,8 @@ and the :class:`~agents.search.controller.WaypointController`:
    place is not cut off;
 4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
    for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
-   see :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
+   and repairs with large neighbourhoods where either runs out of its budget, see
+   :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
    takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
    they are at nodes whose predicted distance (either direction) is below
    ``proximity_radius`` (buffer nodes are distinct points, so "same node" alone would miss
@@ -26,7 +27,7 @@ reports the largest value used), so the rest of the graph stays as safe as asked
 ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
 call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
 Every solver call is budgeted in expansions (``expansion_limit``,
-``prioritized_expansions_per_agent``), with a wall-clock limit
+``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``), with a wall-clock limit
 (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
@@ -86,8 +87,8 @@ class MultiAgentPlan:
         predicted_cost: per agent, the predicted cost of its route (sum over its edges).
         problem: the problem graph the plan was made on (node observations, dense ``D`` and
             ``C``, the pruned graph), for execution, plots and inspection.
-        solver: which solver made the plan (``"cbs"``, ``"prioritized"`` or ``"single"``;
-            ``""`` when none ran).
+        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"`` or
+            ``"single"``; ``""`` when none ran).
     """
 
     status: str
@@ -218,13 +219,22 @@ class BufferPlanner:
             (prioritised planning with safe-interval path planning,
             :func:`~agents.search.mapf.prioritized.solve_prioritized`: agents one after
             another, each on its earliest path around the earlier ones; fast with hundreds of
-            agents, cost not bounded, can fail where a plan exists) or ``"auto"`` (default):
-            ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``.
+            agents, cost not bounded, can fail where a plan exists), ``"lns"`` (large-neighbourhood
+            repair, :func:`~agents.search.mapf.lns.solve_lns`: a prioritised plan in which an
+            agent that finds no conflict-free path takes the least conflicting one, then small
+            groups of agents re-planned until no conflict is left; solves crowds where
+            prioritised planning gives up) or ``"auto"`` (default): ``"cbs"`` for up to
+            ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``, and ``"lns"`` after
+            either if it runs out of its budget (status ``"timeout"``).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
             (space-time states; ``None``: none). Counted in work, not seconds, so the same
             problem gives the same plan (or the same timeout) on an idle and a loaded machine.
         prioritized_expansions_per_agent: the work budget of prioritised planning, in
             safe-interval expansions over all agents and restarts, per agent (``None``: none).
+        repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in
+            search expansions over the initial plan and the repair, per agent (``None``: none).
+        repair_seed: seeds the repair's choice of the agents re-planned together (an integer;
+            the same seed, the same plan).
         time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
             Either ends the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report

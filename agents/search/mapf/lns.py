@@ -562,6 +562,7 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
             rng.shuffle(group)
             new_conf: Dict[int, Set[int]] = {}
             done = True
+            after = 0
             for i in group:
                 p = soft_sipp(inst, i, table, expansion_limit, run.counter, call_limit)
                 if p is None:
@@ -569,8 +570,11 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
                     break
                 new_conf[i] = table.conflicts(p, i)
                 table.reserve(i, p)
-            after = sum(len(c) for c in new_conf.values())
-            if done and after <= len(before):
+                after += len(new_conf[i])
+                if after > len(before):  # more conflicts already: the old paths stay
+                    done = False
+                    break
+            if done:
                 for i, c in new_conf.items():
                     conf[i] = c
                     for j in c:
