@@ -284,26 +284,25 @@ def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Opti
     l_dep: List[int] = []
     l_wait: List[bool] = []
     alive: List[bool] = []
-    fronts: Dict[int, List[int]] = {}
+    fronts: Dict[int, List[Tuple[int, int, int]]] = {}  # state code -> its labels' (arrival, agents met, id)
     heap: List[Tuple[int, int, int, int, int]] = []
     push, pop = heapq.heappush, heapq.heappop
 
-    def add(node: int, j: int, met: FrozenSet[int], t: int, parent: int, dep: int, wait: bool) -> None:
+    def add(node: int, j: int, met: FrozenSet[int], c: int, t: int, parent: int, dep: int, wait: bool) -> None:
         code = j * N + node
         front = fronts.get(code)
         if front is None:
             front = fronts[code] = []
         elif front:
-            c = len(met)
-            for x in front:
-                if l_t[x] <= t and len(l_met[x]) <= c:
+            for ft, fc, _ in front:
+                if ft <= t and fc <= c:
                     return
             kept = []
-            for x in front:
-                if t <= l_t[x] and c <= len(l_met[x]):
-                    alive[x] = False
+            for e in front:
+                if t <= e[0] and c <= e[1]:
+                    alive[e[2]] = False
                 else:
-                    kept.append(x)
+                    kept.append(e)
             front[:] = kept
         lid = len(l_node)
         l_node.append(node)
@@ -314,10 +313,11 @@ def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Opti
         l_dep.append(dep)
         l_wait.append(wait)
         alive.append(True)
-        front.append(lid)
-        push(heap, (len(met), t + h[node], -t, 1, lid))
+        front.append((t, c, lid))
+        push(heap, (c, t + h[node], -t, 1, lid))
 
-    add(s, 0, segments(s)[2][0], 0, -1, 0, False)
+    first = segments(s)[2][0]
+    add(s, 0, first, len(first), 0, -1, 0, False)
     while heap:
         _, _, _, kind, lid = pop(heap)
         if kind == 0:
@@ -338,7 +338,8 @@ def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Opti
         if u == g and not l_wait[lid]:  # park here for good
             push(heap, (len(met | later_at_goal[j]), t_u, -t_u, 0, lid))
         if b_u < FOREVER:  # wait into u's next segment
-            add(u, j + 1, met | us[j + 1], b_u + 1, lid, 0, True)
+            new = met | us[j + 1]
+            add(u, j + 1, new, len(new), b_u + 1, lid, 0, True)
         n_u = len(ua)
         c_met = len(met)
         for v, d in out[u]:
@@ -373,31 +374,40 @@ def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Opti
                     new = met if new <= met else met | new
                     cn = len(new)
                     if cn == c_met or cn < fewest:
-                        add(v, jt, new, t + 1, lid, t, False)
+                        add(v, jt, new, cn, t + 1, lid, t, False)
                         fewest = min(fewest, cn)
                 continue
             # durative: during the move u and v are occupied over steps t .. t + d - 1, then v
             # from t + d on; what it meets changes where one of v's segments leaves that window
-            if n_v == 1 and vs[0] <= met and t_u + d - 1 <= b_u:
-                add(v, 0, met, t_u + d, lid, t_u, False)
+            if n_v == 1 and t_u + d - 1 <= b_u:  # one segment, and u is left within its segment
+                only = vs[0]
+                new = met if (not only or only <= met) else met | only
+                add(v, 0, new, len(new), t_u + d, lid, t_u, False)
                 continue
             jv = 0 if n_v == 1 else bisect_right(va, t_u) - 1
             t = t_u
             while True:
                 arr = t + d
                 k = jv
-                new = met | vs[k]
+                new = met
+                there = vs[k]
+                if there and not there <= new:
+                    new = new | there
                 while k + 1 < n_v and va[k + 1] <= arr:
                     k += 1
-                    new = new | vs[k]
+                    there = vs[k]
+                    if there and not there <= new:
+                        new = new | there
                 if arr - 1 > b_u:  # still leaving u after its segment ends
                     x = j + 1
                     while x < n_u and ua[x] <= arr - 1:
-                        new = new | us[x]
+                        there = us[x]
+                        if there and not there <= new:
+                            new = new | there
                         x += 1
                 cn = len(new)
                 if cn == c_met or cn < fewest:
-                    add(v, k, new, arr, lid, t, False)
+                    add(v, k, new, cn, arr, lid, t, False)
                     if cn < fewest:
                         fewest = cn
                 e = vb[jv]
