@@ -9,10 +9,11 @@ removes them afterwards.
 1. **Initial plan**: prioritised planning, where an agent that finds no conflict-free path gets
    the path with the fewest conflicts instead (:func:`soft_sipp`).
 2. **Repair**: while some agents conflict, pick a *neighbourhood* of a few agents (an agent in a
-   conflict, the agents it conflicts with and theirs, then agents whose paths come near theirs),
-   drop their paths and plan them again one by one, in random order, each on its path with the
-   fewest conflicts against all the other paths; keep the new paths if the number of pairs of
-   agents in conflict did not grow, else put the old ones back.
+   conflict, the agents it conflicts with and theirs, the agents in the way of their shortest
+   paths, then agents whose paths come near theirs), drop their paths and plan them again one
+   by one, in random order, each on its least conflicting path against all the other paths;
+   keep the new paths if the number of pairs of agents in conflict did not grow, else put the
+   old ones back.
 
 :class:`ConflictTable` holds the planned paths and answers which agents a path, a move or a wait
 conflicts with, with the conflict rules of :func:`~agents.search.mapf.validate.validate` (durative
@@ -240,18 +241,21 @@ class ConflictTable:
 # ---------------------------------------------------------------------- low level
 def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Optional[int] = None,
               counter: Optional[List[int]] = None, limit: Optional[int] = None) -> Optional[Events]:
-    """The path of ``agent`` that conflicts with the fewest agents of ``table``, then the earliest.
+    """A path of ``agent`` that conflicts with few agents of ``table`` (none if it can), then early.
 
     A best-first search over ``(node, segment)`` states, where a node's segments are the maximal
     ranges of time in which the same agents of ``table`` are there (:meth:`ConflictTable.segments`):
     safe-interval path planning (:func:`~agents.search.mapf.sipp.sipp`) with every range allowed
-    at a price. A label holds its arrival time and the set of agents its path has met; it is
-    kept unless another label of its state arrived no later having met a subset of its agents.
-    Labels are expanded fewest agents first, then by arrival plus the true distance to the goal;
-    arriving at the goal adds the agents that come to the goal later (the agent stays there).
-    So the path returned conflicts with the fewest agents (as
-    :meth:`ConflictTable.conflicts` counts them) and, among those, arrives earliest; where a
-    conflict-free path exists it arrives when :func:`~agents.search.mapf.sipp.sipp`'s does.
+    at a price. A label holds its arrival time and the set of agents its path has met (exactly
+    those :meth:`ConflictTable.conflicts` would count); labels are expanded fewest agents first,
+    then by arrival plus the true distance to the goal, and arriving at the goal adds the agents
+    that come to the goal later (the agent stays there). Two shortcuts keep the search small, at
+    the price of not always finding the fewest: a state keeps only the labels that no other
+    label of it beats in both arrival and number of agents met, and a move leaves later than
+    its earliest departure only into a range where it meets no one new, or to meet fewer than
+    every earlier departure. Where a conflict-free path exists, the result is one, and it
+    arrives when :func:`~agents.search.mapf.sipp.sipp`'s does; on the small graphs of the tests
+    the result also meets the fewest agents.
 
     ``counter`` (a one-element list) accumulates expansions; past ``budget`` the search raises
     :class:`~agents.search.mapf.sipp.BudgetExceeded`; past ``limit`` expansions of this call it
