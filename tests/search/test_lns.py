@@ -7,7 +7,8 @@ from test_cbs_bruteforce import adjacency, pick, random_graph
 from test_prioritized import blocked_steps, brute_force_arrival, random_proximity
 
 from agents.search.mapf import MapfInstance, Proximity, validate
-from agents.search.mapf.lns import ConflictTable, direct_path, occupancy, soft_sipp, solve_lns
+from agents.search.mapf.conflict_table import ConflictTable, occupancy, soft_sipp
+from agents.search.mapf.lns import direct_path, solve_lns
 from agents.search.mapf.prioritized import solve_prioritized
 from agents.search.mapf.sipp import FOREVER, IntervalTable, sipp
 

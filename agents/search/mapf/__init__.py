@@ -82,8 +82,9 @@ Modules, one concept each
     search of a meta-agent), ``successors`` (what the low-level searches share),
     ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``,
     ``movingai`` (benchmark files), ``sipp`` (safe intervals and the single-agent search over
-    them), ``prioritized`` (prioritised planning), ``lns`` (the large-neighbourhood repair) and
-    ``feasibility`` (the exhaustive check).
+    them), ``prioritized`` (prioritised planning), ``lns`` (the large-neighbourhood repair),
+    ``conflict_table`` (planning with conflicts allowed, its low level) and ``feasibility`` (the
+    exhaustive check).
 """
 from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict
 from .constraints import (

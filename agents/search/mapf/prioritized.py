@@ -24,16 +24,14 @@ from __future__ import annotations
 import collections
 import heapq
 import time as _time
-from typing import TYPE_CHECKING, List, Optional, Sequence, Set, Tuple
+from typing import List, Optional, Sequence, Set, Tuple
 
+from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
 from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
 from .solver import DEFAULT_JOINT_CHECK_STATES
-
-if TYPE_CHECKING:  # the repair module imports this one
-    from .lns import ConflictTable
 
 #: default SIPP expansions of one solve, over all agents and restarts
 DEFAULT_EXPANSION_LIMIT = 2_000_000
@@ -154,7 +152,7 @@ def initial_order(inst: MapfInstance) -> List[int]:
 
 def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
                   budget: Optional[int] = None, deadline: Optional[float] = None,
-                  start_hold: int = 0, soft: Optional["ConflictTable"] = None,
+                  start_hold: int = 0, soft: Optional[ConflictTable] = None,
                   soft_limit: Optional[int] = None) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
     """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
 
@@ -168,10 +166,10 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
     ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
 
-    With ``soft`` (an empty :class:`~agents.search.mapf.lns.ConflictTable` of the instance) no
-    agent fails: one that finds no conflict-free path gets the path with the fewest conflicts
+    With ``soft`` (an empty :class:`~agents.search.mapf.conflict_table.ConflictTable` of the
+    instance) no agent fails: one that finds no conflict-free path gets a path with few conflicts
     with the paths planned so far and the starts of the agents still waiting
-    (:func:`~agents.search.mapf.lns.soft_sipp`, at most ``soft_limit`` expansions; an agent
+    (:func:`~agents.search.mapf.conflict_table.soft_sipp`, at most ``soft_limit`` expansions; an agent
     whose search passes that limit is reported as failed), and the later agents plan around
     it as around any other. ``soft`` then holds every agent's path.
     """
@@ -217,8 +215,6 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         if i in deferred or not waiting:
             if soft is None:
                 return None, i
-            from .lns import soft_sipp  # the repair module imports this one
-
             soft.release(i)
             p = soft_sipp(inst, i, soft, budget, counter, soft_limit)
             if p is None:
