@@ -9,7 +9,7 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
   median sum of costs, per solver, without the planner's fallback:
 
   - ``auto``: the planner's default (ECBS w = 1.1 up to 20 agents, prioritised planning with
-    safe intervals above, the large-neighbourhood repair where either runs out of its budget);
+    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget);
   - ``prioritized``: prioritised planning alone;
   - ``lns``: the large-neighbourhood repair alone (a prioritised plan whose stuck agents take
     their least conflicting paths, then small groups of agents re-planned until no conflict is

@@ -12,7 +12,7 @@ and the :class:`~agents.search.controller.WaypointController`:
    place is not cut off;
 4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
    for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
-   and repairs with large neighbourhoods where either runs out of its budget, see
+   and repairs with large neighbourhoods where ECBS runs out of its budget, see
    :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
    takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
    they are at nodes whose predicted distance (either direction) is below
@@ -55,7 +55,7 @@ from .sparsify import two_way_consistent
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
 SOLVERS = ("auto", "cbs", "prioritized", "lns")
 #: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
-#: large-neighbourhood repair where either runs out of its budget).
+#: large-neighbourhood repair where CBS / ECBS runs out of its budget).
 AUTO_SEARCH_AGENTS = 20
 #: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
 #: buffer graph on an idle machine
@@ -224,8 +224,10 @@ class BufferPlanner:
             agent that finds no conflict-free path takes the least conflicting one, then small
             groups of agents re-planned until no conflict is left; solves crowds where
             prioritised planning gives up) or ``"auto"`` (default): ``"cbs"`` for up to
-            ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``, and ``"lns"`` after
-            either if it runs out of its budget (status ``"timeout"``).
+            ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its
+            budget (status ``"timeout"``), else ``"prioritized"`` (not followed by the repair:
+            where prioritised planning gives up on the 1000-node buffer graph, the repair spent
+            its whole budget, about a minute, and solved none).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
             (space-time states; ``None``: none). Counted in work, not seconds, so the same
             problem gives the same plan (or the same timeout) on an idle and a loaded machine.
@@ -457,7 +459,7 @@ class BufferPlanner:
             if res.status == "timeout" and fb is not None and fb > self.suboptimality:
                 res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
                                 expansion_limit=self.expansion_limit).solve()
-        if auto and res.status == "timeout":
+        if auto and solver == "cbs" and res.status == "timeout":
             repaired = self._repair(inst)
             repaired.message = f"{repaired.message} (after {solver}: {res.message})"
             return repaired, "lns"

@@ -331,11 +331,14 @@ def test_planner_repair_solver_and_auto_fallback():
     assert plan.solved and plan.solver == "lns", plan.message
     assert _validate_plan(plan, 24, 0.9) == []
     assert planner.with_options(solver="auto").options()["repair_seed"] == 2
-    # prioritised planning out of its budget: "auto" repairs
-    starved = planner.with_options(solver="auto", prioritized_expansions_per_agent=1)
-    plan = starved.plan(starts, goals)
-    assert plan.solved and plan.solver == "lns" and "after prioritized" in plan.message, plan.message
-    assert _validate_plan(plan, 24, 0.9) == []
+    # ECBS out of its budget: "auto" repairs
+    starved = planner.with_options(solver="auto", expansion_limit=1, fallback_suboptimality=None)
+    plan = starved.plan(starts[:12], goals[:12])
+    assert plan.solved and plan.solver == "lns" and "after cbs" in plan.message, plan.message
+    assert _validate_plan(plan, 12, 0.9) == []
+    # prioritised planning out of its budget (above 20 agents): "auto" reports the timeout, no repair
+    plan = planner.with_options(solver="auto", prioritized_expansions_per_agent=1).plan(starts, goals)
+    assert plan.status == "timeout" and plan.solver == "prioritized", plan.message
     # few agents: "auto" is CBS / ECBS as before, with the same plan
     auto = planner.with_options(solver="auto")
     few = auto.plan(starts[:4], goals[:4])

@@ -233,11 +233,13 @@ def test_planner_budget_is_counted_in_expansions():
                            prioritized_expansions_per_agent=1, repair_expansions_per_agent=2,
                            fallback_suboptimality=None)
     plan = planner.plan(starts, goals)
-    # prioritised planning runs out of 1 expansion per agent, then the repair of 2 per agent
-    assert plan.status == "timeout" and plan.solver == "lns", plan.message
-    assert "expansion limit of 48" in plan.message and "expansion limit of 24" in plan.message
+    # prioritised planning runs out of 1 expansion per agent (no repair behind it)
+    assert plan.status == "timeout" and plan.solver == "prioritized", plan.message
+    assert "expansion limit of 24" in plan.message
+    # ECBS runs out of its 30 expansions, then the repair of 2 per agent
     plan = planner.plan(starts[:5], goals[:5])
-    assert plan.status == "timeout" and "expansion limit of 30" in plan.message
+    assert plan.status == "timeout" and plan.solver == "lns", plan.message
+    assert "expansion limit of 30" in plan.message and "expansion limit of 10" in plan.message
     with pytest.raises(ValueError, match="solver"):
         make_planner(pts, euclid_pairwise(), solver="lacam")
     with pytest.raises(ValueError, match="expansion_limit"):
