@@ -9,8 +9,11 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
   median sum of costs, per solver, without the planner's fallback:
 
   - ``auto``: the planner's default (ECBS w = 1.1 up to 20 agents, prioritised planning with
-    safe intervals above);
+    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget);
   - ``prioritized``: prioritised planning alone;
+  - ``lns``: the large-neighbourhood repair alone (a prioritised plan whose stuck agents take
+    their least conflicting paths, then small groups of agents re-planned until no conflict is
+    left);
   - ``ecbs``: ECBS w = 1.1; ``cbs``: optimal CBS; ``cbs-unit``: optimal CBS with unit-time
     edges (the paper's time model: every edge one step).
 
@@ -46,6 +49,7 @@ from baselines.evaluation import EvaluationSetup, make_problems
 SOLVER_OPTIONS = {
     "auto": dict(solver="auto"),
     "prioritized": dict(solver="prioritized"),
+    "lns": dict(solver="lns"),
     "ecbs": dict(solver="cbs", suboptimality=1.1),
     "cbs": dict(solver="cbs", suboptimality=1.0),
     "cbs-unit": dict(solver="cbs", suboptimality=1.0, time_model="unit"),

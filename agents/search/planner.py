@@ -12,7 +12,8 @@ and the :class:`~agents.search.controller.WaypointController`:
    place is not cut off;
 4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
    for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
-   see :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
+   and repairs with large neighbourhoods where ECBS runs out of its budget, see
+   :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
    takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
    they are at nodes whose predicted distance (either direction) is below
    ``proximity_radius`` (buffer nodes are distinct points, so "same node" alone would miss
@@ -26,7 +27,7 @@ reports the largest value used), so the rest of the graph stays as safe as asked
 ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
 call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
 Every solver call is budgeted in expansions (``expansion_limit``,
-``prioritized_expansions_per_agent``), with a wall-clock limit
+``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``), with a wall-clock limit
 (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
@@ -46,13 +47,15 @@ from .controller import AgentPlan
 from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
+from .mapf.lns import solve_lns
 from .mapf.prioritized import solve_prioritized
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
-SOLVERS = ("auto", "cbs", "prioritized")
-#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above.
+SOLVERS = ("auto", "cbs", "prioritized", "lns")
+#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
+#: large-neighbourhood repair where CBS / ECBS runs out of its budget).
 AUTO_SEARCH_AGENTS = 20
 #: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
 #: buffer graph on an idle machine
@@ -60,6 +63,8 @@ DEFAULT_EXPANSION_LIMIT = 50_000
 #: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
 #: 150,000 to 190,000 safe-interval expansions
 DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_000
+#: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
+DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 
 
 @dataclass
@@ -82,8 +87,8 @@ class MultiAgentPlan:
         predicted_cost: per agent, the predicted cost of its route (sum over its edges).
         problem: the problem graph the plan was made on (node observations, dense ``D`` and
             ``C``, the pruned graph), for execution, plots and inspection.
-        solver: which solver made the plan (``"cbs"``, ``"prioritized"`` or ``"single"``;
-            ``""`` when none ran).
+        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"`` or
+            ``"single"``; ``""`` when none ran).
     """
 
     status: str
@@ -214,13 +219,24 @@ class BufferPlanner:
             (prioritised planning with safe-interval path planning,
             :func:`~agents.search.mapf.prioritized.solve_prioritized`: agents one after
             another, each on its earliest path around the earlier ones; fast with hundreds of
-            agents, cost not bounded, can fail where a plan exists) or ``"auto"`` (default):
-            ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, else ``"prioritized"``.
+            agents, cost not bounded, can fail where a plan exists), ``"lns"`` (large-neighbourhood
+            repair, :func:`~agents.search.mapf.lns.solve_lns`: a prioritised plan in which an
+            agent that finds no conflict-free path takes the least conflicting one, then small
+            groups of agents re-planned until no conflict is left; solves crowds where
+            prioritised planning gives up) or ``"auto"`` (default): ``"cbs"`` for up to
+            ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its
+            budget (status ``"timeout"``), else ``"prioritized"`` (not followed by the repair:
+            where prioritised planning gives up on the 1000-node buffer graph, the repair spent
+            its whole budget, about a minute, and solved none).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
             (space-time states; ``None``: none). Counted in work, not seconds, so the same
             problem gives the same plan (or the same timeout) on an idle and a loaded machine.
         prioritized_expansions_per_agent: the work budget of prioritised planning, in
             safe-interval expansions over all agents and restarts, per agent (``None``: none).
+        repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in
+            search expansions over the initial plan and the repair, per agent (``None``: none).
+        repair_seed: seeds the repair's choice of the agents re-planned together (an integer;
+            the same seed, the same plan).
         time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
             Either ends the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
@@ -250,6 +266,8 @@ class BufferPlanner:
         solver: str = "auto",
         expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
         prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
+        repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
+        repair_seed: int = 0,
         time_limit: float = 30.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
@@ -281,15 +299,22 @@ class BufferPlanner:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         for name, lim in (("expansion_limit", expansion_limit),
-                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent)):
-            if lim is not None and not (isinstance(lim, (int, np.integer)) and lim >= 1):
+                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent),
+                          ("repair_expansions_per_agent", repair_expansions_per_agent)):
+            if lim is not None and not (isinstance(lim, (int, np.integer)) and not isinstance(lim, bool)
+                                        and lim >= 1):
                 raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
+        if isinstance(repair_seed, bool) or not isinstance(repair_seed, (int, np.integer)):
+            raise ValueError(f"repair_seed must be an integer, got {repair_seed!r}")
         if not time_limit > 0:
             raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
         self.solver = solver
         self.expansion_limit = None if expansion_limit is None else int(expansion_limit)
         self.prioritized_expansions_per_agent = (None if prioritized_expansions_per_agent is None
                                                  else int(prioritized_expansions_per_agent))
+        self.repair_expansions_per_agent = (None if repair_expansions_per_agent is None
+                                            else int(repair_expansions_per_agent))
+        self.repair_seed = int(repair_seed)
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
@@ -325,6 +350,7 @@ class BufferPlanner:
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
             solver=self.solver, expansion_limit=self.expansion_limit,
             prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
+            repair_expansions_per_agent=self.repair_expansions_per_agent, repair_seed=self.repair_seed,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
             max_edges=self.max_edges)
@@ -415,21 +441,35 @@ class BufferPlanner:
         prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
         inst = MapfInstance(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox)
         solver = self.solver
-        if solver == "auto":
+        auto = solver == "auto"
+        if auto:
             solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
+        if solver == "lns":
+            return self._repair(inst), "lns"
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
             per_agent = self.prioritized_expansions_per_agent
             budget = None if per_agent is None else per_agent * k
-            return solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit), solver
-        res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
-                        expansion_limit=self.expansion_limit).solve()
-        fb = self.fallback_suboptimality
-        if res.status == "timeout" and fb is not None and fb > self.suboptimality:
-            res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
+            res = solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit)
+        else:
+            res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
                             expansion_limit=self.expansion_limit).solve()
-        return res, "cbs"
+            fb = self.fallback_suboptimality
+            if res.status == "timeout" and fb is not None and fb > self.suboptimality:
+                res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
+                                expansion_limit=self.expansion_limit).solve()
+        if auto and solver == "cbs" and res.status == "timeout":
+            repaired = self._repair(inst)
+            repaired.message = f"{repaired.message} (after {solver}: {res.message})"
+            return repaired, "lns"
+        return res, solver
+
+    def _repair(self, inst: MapfInstance) -> CBSResult:
+        """The large-neighbourhood repair with this planner's budget and seed."""
+        per_agent = self.repair_expansions_per_agent
+        budget = None if per_agent is None else per_agent * inst.n_agents
+        return solve_lns(inst, expansion_limit=budget, time_limit=self.time_limit, seed=self.repair_seed)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

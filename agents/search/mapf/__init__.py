@@ -50,9 +50,12 @@ Many agents
     :func:`solve_prioritized`: prioritised planning, each agent on its earliest path around
     the earlier ones by safe-interval path planning (SIPP, :mod:`agents.search.mapf.sipp`),
     restarted with the failed agent first where it gets stuck; fast with hundreds of agents,
-    its cost is not bounded and it can fail where a plan exists. Budgets of every solver can
-    be counted in expansions (``expansion_limit``), so a result does not depend on the
-    machine's load.
+    its cost is not bounded and it can fail where a plan exists. :func:`solve_lns`:
+    large-neighbourhood repair (:mod:`agents.search.mapf.lns`), a prioritised plan in which an
+    agent that finds no conflict-free path takes the one with the fewest conflicts, then small
+    groups of agents re-planned until no conflict is left; it solves crowds where prioritised
+    planning gives up. Budgets of every solver can be counted in expansions
+    (``expansion_limit``), so a result does not depend on the machine's load.
 
 Feasibility
     :func:`joint_feasible`: an exhaustive search over the agents' joint configurations that
@@ -64,6 +67,7 @@ Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
     :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
     :func:`validate` to check any solution independently, :func:`solve_prioritized`,
+    :func:`solve_lns`,
     :func:`joint_feasible`, the constraint and conflict types,
     and the MovingAI benchmark loaders :func:`load_map`, :func:`load_scen`,
     :func:`load_instance`, :func:`grid_graph`.
@@ -78,7 +82,9 @@ Modules, one concept each
     search of a meta-agent), ``successors`` (what the low-level searches share),
     ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``,
     ``movingai`` (benchmark files), ``sipp`` (safe intervals and the single-agent search over
-    them), ``prioritized`` (prioritised planning) and ``feasibility`` (the exhaustive check).
+    them), ``prioritized`` (prioritised planning), ``lns`` (the large-neighbourhood repair),
+    ``conflict_table`` (planning with conflicts allowed, its low level) and ``feasibility`` (the
+    exhaustive check).
 """
 from .conflicts import CARDINAL, EDGE, NON_CARDINAL, PROXIMITY, SEMI_CARDINAL, TARGET, VERTEX, Conflict
 from .constraints import (
@@ -97,6 +103,7 @@ from .constraints import (
 from .ctnode import CTNode
 from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
+from .lns import solve_lns
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
 from .prioritized import solve_prioritized
 from .result import STATUSES, CBSResult, CBSStats
@@ -110,5 +117,5 @@ __all__ = [
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
     "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
-    "load_map", "load_scen", "solve_cbs", "solve_prioritized", "validate",
+    "load_map", "load_scen", "solve_cbs", "solve_lns", "solve_prioritized", "validate",
 ]

@@ -26,6 +26,7 @@ import heapq
 import time as _time
 from typing import List, Optional, Sequence, Set, Tuple
 
+from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
@@ -37,6 +38,80 @@ DEFAULT_EXPANSION_LIMIT = 2_000_000
 #: default ``start_hold``, in moves of the graph's mean duration (30 steps on the 1000-node
 #: buffer graph, whose edges take 5 steps on average; 6 on a unit-time grid)
 DEFAULT_START_HOLD_MOVES = 6
+
+
+class SolveRun:
+    """The counters and limits of one solve: expansions so far, the expansion budget, the deadline.
+
+    Args:
+        expansion_limit: expansions over the whole solve (``None``: no limit).
+        time_limit: wall-clock seconds from now, a safety net (``None``: none).
+    """
+
+    def __init__(self, expansion_limit: Optional[int], time_limit: Optional[float]) -> None:
+        self.t0 = _time.perf_counter()
+        #: expansions so far (a one-element list, shared with the low-level searches)
+        self.counter = [0]
+        self.budget = expansion_limit
+        #: ``time.perf_counter()`` past which the solve stops (``None``: never)
+        self.deadline = None if time_limit is None else self.t0 + time_limit
+        self.stats = CBSStats()
+
+    def check_limits(self) -> None:
+        """Raise ``TimeoutError`` past the deadline, :class:`~agents.search.mapf.sipp.BudgetExceeded`
+        past the expansion budget."""
+        if self.deadline is not None and _time.perf_counter() > self.deadline:
+            raise TimeoutError
+        if self.budget is not None and self.counter[0] > self.budget:
+            raise BudgetExceeded
+
+    def finish(self, inst: MapfInstance, res: CBSResult) -> CBSResult:
+        """``res`` with this run's statistics (expansions, seconds) and the instance's time model."""
+        self.stats.ll_expanded = self.counter[0]
+        self.stats.runtime_s = _time.perf_counter() - self.t0
+        res.stats = self.stats
+        res.time_model = inst.time_model
+        return res
+
+
+def check_common_options(expansion_limit: Optional[int], time_limit: Optional[float],
+                         joint_check_states: int) -> None:
+    """Refuse bad values of the options every prioritised or repair solve takes (``ValueError``)."""
+    if expansion_limit is not None and expansion_limit < 1:
+        raise ValueError(f"expansion_limit must be >= 1 or None, got {expansion_limit!r}")
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
+    if joint_check_states < 0:
+        raise ValueError(f"joint_check_states must be >= 0, got {joint_check_states!r}")
+
+
+def default_start_hold(inst: MapfInstance) -> int:
+    """``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration, in steps."""
+    data = inst.durations.data
+    return int(round(DEFAULT_START_HOLD_MOVES * (float(data.mean()) if len(data) else 1.0)))
+
+
+def no_plan_reason(inst: MapfInstance, joint_check_states: int) -> Optional[str]:
+    """Why no plan exists, if that is quick to prove: an agent that cannot reach its goal even
+    alone, or a small connected part of the graph whose agents have no joint plan (searched
+    exhaustively where it has at most ``joint_check_states`` joint configurations; 0: not
+    searched). ``None``: no proof found (a plan may or may not exist)."""
+    for i in range(inst.n_agents):
+        if inst.h[i][inst.starts[i]] >= UNREACHABLE:
+            return f"agent {i} cannot reach its goal from its start"
+    if joint_check_states > 0:
+        return infeasible_component(inst, joint_check_states)
+    return None
+
+
+def plan_result(paths: List[Events], lower_bound: int, message: str) -> CBSResult:
+    """The result of a conflict-free plan: status ``"optimal"`` where its sum of costs equals
+    ``lower_bound`` (then the message says so), else ``"suboptimal"`` with ``message``."""
+    costs = [p[-1][1] for p in paths]
+    soc = sum(costs)
+    status = "optimal" if soc == lower_bound else "suboptimal"
+    msg = "cost equals the lower bound" if status == "optimal" else message
+    return CBSResult(status, paths, soc, max(costs, default=0), lower_bound, message=msg)
 
 
 def _blocks_start(inst: MapfInstance, goal: int, start: int) -> bool:
@@ -77,7 +152,8 @@ def initial_order(inst: MapfInstance) -> List[int]:
 
 def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
                   budget: Optional[int] = None, deadline: Optional[float] = None,
-                  start_hold: int = 0) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
+                  start_hold: int = 0, soft: Optional[ConflictTable] = None,
+                  soft_limit: Optional[int] = None) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
     """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
 
     ``paths[i]`` is agent ``i``'s events. An agent not planned yet waits at its start, so its
@@ -89,11 +165,20 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     waiting at their starts is put back behind them, once. Raises
     :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
     ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
+
+    With ``soft`` (an empty :class:`~agents.search.mapf.conflict_table.ConflictTable` of the
+    instance) no agent fails: one that finds no conflict-free path gets a path with few conflicts
+    with the paths planned so far and the starts of the agents still waiting
+    (:func:`~agents.search.mapf.conflict_table.soft_sipp`, at most ``soft_limit`` expansions; an agent
+    whose search passes that limit is reported as failed), and the later agents plan around
+    it as around any other. ``soft`` then holds every agent's path.
     """
     table = IntervalTable(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
     for i in order:
         table.hold(i, inst.starts[i], FOREVER)
+        if soft is not None:
+            soft.hold(i, inst.starts[i], FOREVER)
     unplanned = set(order)
     queue = collections.deque(order)
     deferred: Set[int] = set()
@@ -115,6 +200,9 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         if p is not None:
             paths[i] = p
             table.reserve(i, p)
+            if soft is not None:
+                soft.release(i)
+                soft.reserve(i, p)
             continue
         # shut in by agents still waiting at their starts? plan them first, then try again
         region = set(explored)
@@ -125,7 +213,16 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         for x in region:
             waiting |= table.holders(x)
         if i in deferred or not waiting:
-            return None, i
+            if soft is None:
+                return None, i
+            soft.release(i)
+            p = soft_sipp(inst, i, soft, budget, counter, soft_limit)
+            if p is None:
+                return None, i
+            paths[i] = p
+            table.reserve(i, p)
+            soft.reserve(i, p)
+            continue
         deferred.add(i)
         table.hold(i, inst.starts[i], FOREVER)
         unplanned.add(i)
@@ -168,41 +265,26 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         proves that no plan exists.
     """
     if start_hold is None:
-        data = inst.durations.data
-        start_hold = int(round(DEFAULT_START_HOLD_MOVES * (float(data.mean()) if len(data) else 1.0)))
+        start_hold = default_start_hold(inst)
     if start_hold < 0:
         raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
     if restarts < 0:
         raise ValueError(f"restarts must be >= 0, got {restarts!r}")
-    if expansion_limit is not None and expansion_limit < 1:
-        raise ValueError(f"expansion_limit must be >= 1 or None, got {expansion_limit!r}")
-    if time_limit is not None and not time_limit > 0:
-        raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
-    if joint_check_states < 0:
-        raise ValueError(f"joint_check_states must be >= 0, got {joint_check_states!r}")
-    t0 = _time.perf_counter()
-    stats = CBSStats()
-    counter = [0]
+    check_common_options(expansion_limit, time_limit, joint_check_states)
+    run = SolveRun(expansion_limit, time_limit)
+    stats = run.stats
+    k = inst.n_agents
 
     def finish(res: CBSResult) -> CBSResult:
-        stats.ll_expanded = counter[0]
-        stats.runtime_s = _time.perf_counter() - t0
-        res.stats = stats
-        res.time_model = inst.time_model
-        return res
+        return run.finish(inst, res)
 
-    k = inst.n_agents
-    for i in range(k):
-        if inst.h[i][inst.starts[i]] >= UNREACHABLE:
-            return finish(CBSResult("infeasible", message=f"agent {i} cannot reach its goal from its start"))
-    if joint_check_states > 0:
-        reason = infeasible_component(inst, joint_check_states)
-        if reason is not None:
-            return finish(CBSResult("infeasible", message=reason))
+    reason = no_plan_reason(inst, joint_check_states)
+    if reason is not None:
+        return finish(CBSResult("infeasible", message=reason))
     cur = list(order) if order is not None else initial_order(inst)
     if sorted(cur) != list(range(k)):
         raise ValueError(f"order must be a permutation of the {k} agents")
-    deadline = None if time_limit is None else t0 + time_limit
+    counter, deadline = run.counter, run.deadline
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
     failed: Optional[int] = None
     for attempt in range(restarts + 1):
@@ -217,12 +299,7 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
                                     message=f"time limit of {time_limit:g} s reached (prioritised planning)"))
         if paths is not None:
             full = [p for p in paths if p is not None]
-            costs = [p[-1][1] for p in full]
-            soc = sum(costs)
-            status = "optimal" if soc == lb else "suboptimal"
-            msg = ("cost equals the lower bound" if status == "optimal"
-                   else f"prioritised planning ({attempt} restarts); cost not bounded")
-            return finish(CBSResult(status, full, soc, max(costs, default=0), lb, message=msg))
+            return finish(plan_result(full, lb, f"prioritised planning ({attempt} restarts); cost not bounded"))
         assert failed is not None
         if cur[0] == failed:
             # planning is deterministic: the same order would fail the same way again
