@@ -80,7 +80,7 @@ def test_root_bound_with_groups_is_admissible_and_solutions_stay_optimal(name):
     assert plain <= grouped <= expected, (name, plain, grouped, expected)
     for kw in ({}, {"group_bounds": True}, {"group_bounds": True, "merge_threshold": None, "node_limit": 3000},
                {"group_bounds": True, "group_max_agents": 4, "group_node_limit": 50}):
-        res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
+        res = solve_cbs(adj, starts, goals, time_limit=300, **kw)  # a safety net: seconds depend on load
         if res.status == "timeout" and kw.get("merge_threshold", 0) is None:
             assert res.lower_bound is None or res.lower_bound <= expected
             continue
@@ -130,7 +130,7 @@ def test_random_tiny_grids_root_bound_admissible_and_optimal(seed):
     grouped, _ = root_bound(adj, starts, goals, True)
     assert plain <= grouped <= expected, (seed, plain, grouped, expected)
     for kw in ({"group_bounds": True}, {"group_bounds": True, "grid_coords": cells, "group_max_agents": 4}):
-        res = solve_cbs(adj, starts, goals, time_limit=10, **kw)
+        res = solve_cbs(adj, starts, goals, time_limit=300, **kw)  # a safety net: seconds depend on load
         assert res.status == "optimal" and res.soc == expected, (seed, kw, res.status, res.soc, expected)
         assert validate(adj, starts, goals, res.paths) == []
 
