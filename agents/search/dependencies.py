@@ -16,7 +16,7 @@ on it.
 """
 from __future__ import annotations
 
-from typing import Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Sequence, Tuple
 
 import numpy as np
 
@@ -84,4 +84,43 @@ def proximity_relation(D: np.ndarray, radius: float, n_buffer: int, n_agents: in
     return close
 
 
-__all__ = ["Dependencies", "plan_dependencies", "proximity_relation"]
+def goal_passers(problem: Any, goal: int, others: Mapping[str, Tuple[Sequence[int], Any, int, int]],
+                 radius: float) -> List[Tuple[str, int]]:
+    """The agents whose remaining routes pass the goal node ``goal`` of ``problem``, each with the
+    target index it must reach (leave the place) before an agent may park there.
+
+    A leg passes the goal when its end is within ``radius`` predicted steps of it (the
+    planner's own conflict, on the routes as they are now: routes made by replans are in no plan
+    order), or when the goal lies on the way: going through it is at most ``radius`` longer than
+    the leg, which the planner does not see. Two goals side by side do not count (the planner
+    lets agents park so).
+
+    Args:
+        problem: the problem graph of the parking agent (``D``, ``n_buffer``).
+        goal: its goal's node id there.
+        others: per other agent, ``(route, its problem graph, its goal's id there, its current
+            target index)``; buffer node ids are shared between problem graphs, an agent's own
+            start and goal only when it was planned on ``problem`` too.
+        radius: the proximity radius (predicted steps).
+    """
+    D = problem.D
+    out: List[Tuple[str, int]] = []
+    for b, (route, pb, gb, k) in others.items():
+        nodes = [*route, gb]
+        ids = [u if (u < problem.n_buffer or pb is problem) else -1 for u in nodes]
+        last = -1
+        for q in range(max(k, 1), len(nodes)):
+            u, v = ids[q - 1], ids[q]
+            near = v >= 0 and min(D[v, goal], D[goal, v]) < radius
+            if near and q == len(route):
+                continue  # goals side by side
+            if near:
+                last = q + 1 if q + 1 < len(nodes) else q
+            elif u >= 0 and v >= 0 and D[u, goal] + D[goal, v] <= D[u, v] + radius:
+                last = q
+        if last >= 0:
+            out.append((b, last))
+    return out
+
+
+__all__ = ["Dependencies", "goal_passers", "plan_dependencies", "proximity_relation"]

@@ -35,7 +35,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
-from .dependencies import plan_dependencies, proximity_relation
+from .dependencies import goal_passers, plan_dependencies, proximity_relation
 from .graph import NodePairwise, ProblemGraph
 from .models import (
     buffer_observations,
@@ -94,7 +94,7 @@ class SearchPolicy:
             once that one has got far enough (:mod:`agents.search.dependencies`; an agent that is
             slower than planned delays the others instead of meeting them), and an agent parks at
             its goal only once the agents whose routes still pass it have gone by
-            (:meth:`_goal_blockers`). ``"waits"`` (an early
+            (:func:`~agents.search.dependencies.goal_passers`). ``"waits"`` (an early
             agent waits for its planned departure time where CBS made it wait) or ``"all"`` (at
             every waypoint): on the clock. Default :func:`default_hold` of the judging model:
             ``"order"`` for panorama agents, ``"waits"`` for vector ones.
@@ -518,43 +518,15 @@ class SearchPolicy:
         return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
 
     def _goal_blockers(self, agent: str) -> List[Tuple[str, int]]:
-        """The agents whose remaining routes pass ``agent``'s goal, each with the target index it must
-        reach before ``agent`` may park there (the controller's ``goal_order``).
-
-        A leg passes the goal when one of its ends is within the planner's proximity radius of it
-        (the planner's own conflict, on the routes as they are now: agents that replanned are in
-        no plan order), or when the goal lies on the way: going through it is at most that radius
-        longer than the leg (predicted steps), which the planner does not see.
-        """
+        """The controller's ``goal_order``: :func:`~agents.search.dependencies.goal_passers` of
+        ``agent`` on the routes as they are now, within the planner's proximity radius."""
         assert self.planner is not None and self.controller is not None
         if agent not in self._route_graph:
             return []
-        radius = float(self.planner.proximity_radius or 0.0)
-        problem, g, _ = self._route_graph[agent]
-        out: List[Tuple[str, int]] = []
-        for b in self.agents:
-            if b == agent or b not in self._route_graph:
-                continue
-            pb, gb, _ = self._route_graph[b]
-            route = self.routes.get(b, [])
-            k = self.controller.index.get(b, 0)
-            nodes = list(route) + [gb]
-            # the nodes of b's route as ids of agent's problem graph (buffer ids are shared;
-            # b's own endpoints only when both were planned together)
-            same = pb is problem
-            ids = [u if (u < problem.n_buffer or same) else -1 for u in nodes]
-            last = -1
-            for q in range(max(k, 1), len(nodes)):
-                u, v = ids[q - 1], ids[q]
-                if q == len(route) and v >= 0 and min(problem.D[v, g], problem.D[g, v]) < radius:
-                    continue  # goals side by side: both park (the planner lets them)
-                if v >= 0 and min(problem.D[v, g], problem.D[g, v]) < radius:
-                    last = q + 1 if q + 1 < len(nodes) else q  # it must leave the place, not get there
-                elif u >= 0 and v >= 0 and problem.D[u, g] + problem.D[g, v] <= problem.D[u, v] + radius:
-                    last = q
-            if last >= 0:
-                out.append((b, last))
-        return out
+        others = {b: (self.routes.get(b, []), *self._route_graph[b][:2], self.controller.index.get(b, 0))
+                  for b in self.agents if b != agent and b in self._route_graph}
+        problem, goal, _ = self._route_graph[agent]
+        return goal_passers(problem, goal, others, float(self.planner.proximity_radius or 0.0))
 
     def _parked_nodes(self, agent: str) -> List[int]:
         """Buffer nodes within ``ban_radius`` predicted steps of the goals of the agents that have arrived
