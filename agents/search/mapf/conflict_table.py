@@ -15,7 +15,7 @@ from bisect import bisect_right
 from typing import Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 
 from .instance import UNREACHABLE, MapfInstance
-from .sipp import FOREVER, BudgetExceeded, Events
+from .sipp import FOREVER, BudgetExceeded, Events, NodeRanges
 
 _EMPTY: FrozenSet[int] = frozenset()
 #: A node's timeline cut into maximal ranges with the same agents: ``(firsts, lasts, agents)``.
@@ -47,7 +47,7 @@ def occupancy(events: Sequence[Tuple[int, int]], unit: bool) -> Tuple[List[Tuple
     return spans, moves
 
 
-class ConflictTable:
+class ConflictTable(NodeRanges[Segments]):
     """The planned paths of an instance's agents, and which agents a path or a move conflicts with.
 
     Every occupied range of steps is recorded at its node and at the nodes near it, tagged with
@@ -60,46 +60,12 @@ class ConflictTable:
     """
 
     def __init__(self, inst: MapfInstance) -> None:
-        self.inst = inst
-        self.unit = inst.unit
-        n = inst.n_nodes
-        #: per node, occupied inclusive ranges ``(first, last, agent, is_hold)``
-        self._entries: List[List[Tuple[int, int, int, bool]]] = [[] for _ in range(n)]
-        self._segments: List[Optional[Segments]] = [None] * n
-        self._touched: Dict[Tuple[int, bool], Set[int]] = {}
+        super().__init__(inst)
         #: unit time: ``(u, v) -> {t: agents leaving u for v at t}``
         self._moves: Dict[Tuple[int, int], Dict[int, Set[int]]] = {}
         self._agent_moves: Dict[int, List[Tuple[int, int, int]]] = {}
         #: the paths in the table, by agent
         self.paths: Dict[int, Events] = {}
-        near = inst.near
-        self._reach: List[Tuple[int, ...]] = [
-            tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
-        #: per node, its moves ``(v, duration)`` (waiting left out)
-        self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
-
-    # ------------------------------------------------------------------ contents
-    def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
-        self._touched.setdefault((agent, hold), set()).add(node)
-        entry = (first, last, agent, hold)
-        for x in self._reach[node]:
-            self._entries[x].append(entry)
-            self._segments[x] = None
-
-    def _drop(self, agent: int, hold: bool) -> None:
-        for node in self._touched.pop((agent, hold), ()):
-            for x in self._reach[node]:
-                self._entries[x] = [e for e in self._entries[x] if e[2] != agent or e[3] != hold]
-                self._segments[x] = None
-
-    def hold(self, agent: int, node: int, last: int) -> None:
-        """Record ``agent`` at ``node`` during ``0 .. last`` (an agent waiting at its start before it
-        is planned), until :meth:`release`."""
-        self._block(agent, True, node, 0, last)
-
-    def release(self, agent: int) -> None:
-        """Drop what :meth:`hold` recorded for ``agent``."""
-        self._drop(agent, True)
 
     def reserve(self, agent: int, events: Events) -> None:
         """Record ``agent``'s path (``[(node, time), ...]``, then parked at its last node)."""
@@ -129,18 +95,18 @@ class ConflictTable:
     # ------------------------------------------------------------------ queries
     def agents_at(self, node: int) -> Set[int]:
         """The agents recorded at ``node`` (or near it) at any time."""
-        return {e[2] for e in self._entries[node]}
+        return {e[2] for e in self._ranges[node]}
 
     def segments(self, node: int) -> Segments:
         """``node``'s timeline cut into maximal ranges in which the same agents are there:
         ``(firsts, lasts, agents)``, the first range starting at 0, the last one ending at
         ``FOREVER``."""
-        seg = self._segments[node]
+        seg = self._cache[node]
         if seg is not None:
             return seg
-        entries = self._entries[node]
+        entries = self._ranges[node]
         if not entries:
-            self._segments[node] = _FREE
+            self._cache[node] = _FREE
             return _FREE
         changes: List[Tuple[int, int, int]] = []
         for first, last, agent, _ in entries:
@@ -171,7 +137,7 @@ class ConflictTable:
         lasts.append(FOREVER)
         sets.append(cur)
         seg = (firsts, lasts, sets)
-        self._segments[node] = seg
+        self._cache[node] = seg
         return seg
 
     def conflicts(self, events: Events, agent: Optional[int] = None) -> Set[int]:
@@ -196,7 +162,7 @@ class ConflictTable:
              agent: Optional[int]) -> Set[int]:
         found: Set[int] = set()
         for node, lo, hi in spans:
-            for first, last, other, _ in self._entries[node]:
+            for first, last, other, _ in self._ranges[node]:
                 if first <= hi and last >= lo:
                     found.add(other)
         for u, v, t in moves:
@@ -234,7 +200,7 @@ def soft_sipp(inst: MapfInstance, agent: int, table: ConflictTable, budget: Opti
         return None
     unit = table.unit
     segments = table.segments
-    cache = table._segments  # filled in by ``segments``
+    cache = table._cache  # filled in by ``segments``
     out = table.out
     moves = table._moves
     N = inst.n_nodes

@@ -24,9 +24,12 @@ from __future__ import annotations
 
 import heapq
 from bisect import bisect_right
-from typing import Dict, List, Optional, Sequence, Set, Tuple
+from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from .instance import UNREACHABLE, MapfInstance
+
+#: What a :class:`NodeRanges` caches per node.
+C = TypeVar("C")
 
 #: The end of an interval that never ends.
 FOREVER = 1 << 50
@@ -39,11 +42,11 @@ _ALWAYS_STARTS = [0]
 Events = List[Tuple[int, int]]
 
 
-class IntervalTable:
-    """Blocked time ranges per node (other agents and the nodes near them), and safe intervals.
-
-    Every range is tagged with the agent it is kept for, so that a hold on an agent's start can
-    be dropped once the agent is planned (:meth:`release`).
+class NodeRanges(Generic[C]):
+    """Time ranges per node, tagged with the agent they are kept for, recorded at the node and at
+    the nodes near it, with a per-node cache (of safe intervals, or of segments) that a change
+    clears. The shared bookkeeping of :class:`IntervalTable` and
+    :class:`~agents.search.mapf.conflict_table.ConflictTable`.
 
     Args:
         inst: the instance (graph, time model, proximity).
@@ -53,14 +56,12 @@ class IntervalTable:
         self.inst = inst
         self.unit = inst.unit
         n = inst.n_nodes
-        #: per node, blocked inclusive ranges ``(first, last, agent, is_hold)``
-        self._blocked: List[List[Tuple[int, int, int, bool]]] = [[] for _ in range(n)]
-        self._safe: List[Optional[List[Tuple[int, int]]]] = [None] * n
-        self._starts: List[Optional[List[int]]] = [None] * n
+        #: per node, inclusive ranges ``(first, last, agent, is_hold)``
+        self._ranges: List[List[Tuple[int, int, int, bool]]] = [[] for _ in range(n)]
+        #: per node, what was computed from its ranges (``None``: to compute again)
+        self._cache: List[Optional[C]] = [None] * n
         #: per agent, the nodes whose reach its path or hold blocks
         self._touched: Dict[Tuple[int, bool], Set[int]] = {}
-        #: unit time: reserved moves ``(u, v, t)`` (leaving ``u`` at ``t``), for swap checks
-        self.moves: Set[Tuple[int, int, int]] = set()
         near = inst.near
         self._reach: List[Tuple[int, ...]] = [
             tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
@@ -71,17 +72,17 @@ class IntervalTable:
         self._touched.setdefault((agent, hold), set()).add(node)
         entry = (first, last, agent, hold)
         for x in self._reach[node]:
-            self._blocked[x].append(entry)
-            self._safe[x] = None
+            self._ranges[x].append(entry)
+            self._cache[x] = None
 
     def _drop(self, agent: int, hold: bool) -> None:
         for node in self._touched.pop((agent, hold), ()):
             for x in self._reach[node]:
-                self._blocked[x] = [e for e in self._blocked[x] if e[2] != agent or e[3] != hold]
-                self._safe[x] = None
+                self._ranges[x] = [e for e in self._ranges[x] if e[2] != agent or e[3] != hold]
+                self._cache[x] = None
 
     def hold(self, agent: int, node: int, last: int) -> None:
-        """Keep ``node`` (and the nodes near it) free for ``agent`` during ``0 .. last`` until
+        """Keep ``node`` (and the nodes near it) for ``agent`` during ``0 .. last`` until
         :meth:`release` (an agent not planned yet waits at its start)."""
         self._block(agent, True, node, 0, last)
 
@@ -89,9 +90,27 @@ class IntervalTable:
         """Drop what :meth:`hold` kept for ``agent``."""
         self._drop(agent, True)
 
+
+class IntervalTable(NodeRanges[List[Tuple[int, int]]]):
+    """Blocked time ranges per node (other agents and the nodes near them), and safe intervals.
+
+    Every range is tagged with the agent it is kept for, so that a hold on an agent's start can
+    be dropped once the agent is planned (:meth:`release`).
+
+    Args:
+        inst: the instance (graph, time model, proximity).
+    """
+
+    def __init__(self, inst: MapfInstance) -> None:
+        super().__init__(inst)
+        n = inst.n_nodes
+        self._starts: List[Optional[List[int]]] = [None] * n
+        #: unit time: reserved moves ``(u, v, t)`` (leaving ``u`` at ``t``), for swap checks
+        self.moves: Set[Tuple[int, int, int]] = set()
+
     def holders(self, node: int) -> Set[int]:
         """The agents not planned yet whose held start blocks ``node``."""
-        return {e[2] for e in self._blocked[node] if e[3]}
+        return {e[2] for e in self._ranges[node] if e[3]}
 
     def reserve(self, agent: int, events: Sequence[Tuple[int, int]]) -> None:
         """Block what ``agent`` following ``events`` (then parked at its last node) occupies."""
@@ -108,22 +127,22 @@ class IntervalTable:
 
     def safe(self, node: int) -> List[Tuple[int, int]]:
         """The safe intervals of ``node``: sorted disjoint inclusive ranges ``(first, last)``."""
-        s = self._safe[node]
+        s = self._cache[node]
         if s is None:
-            if not self._blocked[node]:
-                self._safe[node] = ALWAYS
+            if not self._ranges[node]:
+                self._cache[node] = ALWAYS
                 self._starts[node] = _ALWAYS_STARTS
                 return ALWAYS
             s = []
             nxt = 0
-            for a, b, _, _ in sorted(self._blocked[node]):
+            for a, b, _, _ in sorted(self._ranges[node]):
                 if a > nxt:
                     s.append((nxt, a - 1))
                 if b + 1 > nxt:
                     nxt = b + 1
             if nxt <= FOREVER:
                 s.append((nxt, FOREVER))
-            self._safe[node] = s
+            self._cache[node] = s
             self._starts[node] = [a for a, _ in s]
         return s
 
@@ -147,7 +166,7 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     if h[s] >= UNREACHABLE:
         return None
     safe = table.safe
-    cache = table._safe
+    cache = table._cache
     starts_cache = table._starts  # set together with ``cache`` by ``safe``
     unit = table.unit
     moves = table.moves
