@@ -165,8 +165,8 @@ def release_order(inst: MapfInstance) -> List[int]:
     An agent not planned yet waits at its start (:func:`plan_in_order`), so its start and the
     nodes near it are closed to the agents planned before it. An agent is released once it can
     reach its goal (following the graph's directed edges) through nodes at or near no start of
-    an agent not released yet (its own start apart), and once its goal is at or near no such
-    start; the agents released in a round follow :func:`initial_order` among themselves, and
+    an agent not released yet (its own start apart), and once its start and its goal are at or
+    near no such start; the agents released in a round follow :func:`initial_order` among themselves, and
     the agents never released come last, in that order too. Paths of the agents planned before
     are not looked at (prioritised planning deals with them), so the order is cheap: one
     breadth-first search per agent and round over the nodes left open.
@@ -190,8 +190,8 @@ def release_order(inst: MapfInstance) -> List[int]:
             own = np.array(reach[a])
             open_[own[cover[own] == 1]] = True  # near a's own start only
             g = goals[a]
-            if not open_[g]:
-                continue  # the goal is at or near the start of an agent still waiting
+            if not (open_[g] and open_[starts[a]]):
+                continue  # the goal or the start is at or near the start of an agent still waiting
             idx = np.flatnonzero(open_)
             sub = np.full(n, -1, dtype=np.int64)
             sub[idx] = np.arange(len(idx))
@@ -232,6 +232,8 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     whose search passes that limit is reported as failed), and the later agents plan around
     it as around any other. ``soft`` then holds every agent's path.
     """
+    if isinstance(deferrals, bool) or not isinstance(deferrals, int) or deferrals < 0:
+        raise ValueError(f"deferrals must be an integer >= 0, got {deferrals!r}")
     table = IntervalTable(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
     for i in order:
