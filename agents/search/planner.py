@@ -61,8 +61,9 @@ AUTO_SEARCH_AGENTS = 20
 #: buffer graph on an idle machine
 DEFAULT_EXPANSION_LIMIT = 50_000
 #: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
-#: 150,000 to 190,000 safe-interval expansions
-DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_000
+#: 64,000 to 426,000 safe-interval expansions (hard problems; 222 agents, the most the
+#: environment holds, are not solved)
+DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_500
 #: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
 DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 

@@ -5,7 +5,7 @@ from cbs_bruteforce import brute_force_soc, random_grid
 from test_cbs_bruteforce import adjacency, pick, random_graph
 
 from agents.search.mapf import MapfInstance, Proximity, validate
-from agents.search.mapf.prioritized import initial_order, plan_in_order, solve_prioritized
+from agents.search.mapf.prioritized import initial_order, plan_in_order, release_order, solve_prioritized
 from agents.search.mapf.sipp import FOREVER, IntervalTable, sipp
 
 
@@ -207,6 +207,82 @@ def test_gives_up_at_once_when_a_restart_would_repeat_the_last_attempt():
     assert brute_force_soc(n, edges, starts, goals) == 6
     adj = [[v for (u, v) in sorted(edges) if u == x] for x in range(n)]
     res = solve_prioritized(MapfInstance(adj, starts, goals), restarts=20, joint_check_states=0)
-    # agent 0 fails when planned first: moving it to the front again would change nothing
+    # the release order plans agent 1 first (agent 0's way passes its start), then agent 0
+    # fails; the far-first order plans agent 0 first, and it fails there too: moving it to the
+    # front again would change nothing, so two attempts in all
+    assert release_order(MapfInstance(adj, starts, goals)) == [1, 0]
     assert res.status == "timeout" and "repeat the last attempt" in res.message
-    assert res.stats.hl_expanded == 1
+    assert res.stats.hl_expanded == 2
+
+
+def open_route(inst, agent, closed):
+    """Whether ``agent`` can reach its goal along the graph's edges through nodes outside
+    ``closed`` (breadth-first search; an independent rendering of the release rule)."""
+    seen, todo = {inst.starts[agent]}, [inst.starts[agent]]
+    while todo:
+        u = todo.pop()
+        if u == inst.goals[agent]:
+            return True
+        for v in inst.succ[u]:
+            if v not in seen and (v not in closed or v == inst.goals[agent]):
+                seen.add(v)
+                todo.append(v)
+    return False
+
+
+def start_area(inst, agents):
+    """The nodes at or near the starts of ``agents``."""
+    out = set()
+    for a in agents:
+        out.add(inst.starts[a])
+        if inst.near is not None:
+            out.update(inst.near[inst.starts[a]])
+    return out
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_release_order_against_brute_force(seed):
+    # every agent released has a route, and a goal, clear of the starts of the agents after it;
+    # the agents never released (the tail) have none while the tail's starts are there
+    rng = np.random.default_rng(500 + seed)
+    n = int(rng.integers(6, 11))
+    edges = random_graph(rng, n, 0.15, directed=seed % 2 == 0)
+    prox, _ = random_proximity(rng, n, 0.1) if seed % 3 else (None, None)
+    starts, goals = pick(rng, n, int(rng.integers(2, 5)), crossing=seed % 4 == 0)
+    inst = MapfInstance(adjacency(n, edges), starts, goals, time_model="unit", proximity=prox)
+    order = release_order(inst)
+    assert sorted(order) == list(range(inst.n_agents)) and release_order(inst) == order
+    k = inst.n_agents
+
+    def clear(a, later):
+        closed = start_area(inst, later)
+        return inst.starts[a] not in closed and inst.goals[a] not in closed and open_route(inst, a, closed)
+
+    # the longest prefix whose agents are all clear of the agents after them
+    released = 0
+    while released < k and clear(order[released], order[released + 1:]):
+        released += 1
+    tail = order[released:]
+    for a in tail:  # with every agent before the tail gone, no tail agent is clear of the others
+        assert not clear(a, [b for b in tail if b != a])
+    # the tail keeps the far-first order
+    assert tail == [a for a in initial_order(inst) if a in tail]
+
+
+def test_release_order_plans_the_agents_in_the_way_first():
+    # a path 0-1-2-3-4 with pockets 5 (off 1) and 6 (off 3); agent 0 goes 0 -> 4 (the farthest,
+    # first in the far-first order) past agents 1 and 2 waiting at 1 and 3 for their pockets
+    adj = [[1], [0, 2, 5], [1, 3], [2, 4, 6], [3], [1], [3]]
+    inst = MapfInstance(adj, [0, 1, 3], [4, 5, 6], time_model="unit")
+    assert initial_order(inst)[0] == 0
+    assert release_order(inst) == [1, 2, 0]
+    # planned first, agent 0 is shut in by agent 1, then by agent 2: put back behind each
+    paths, failed = plan_in_order(inst, [0, 1, 2], [0], deferrals=1)
+    assert paths is None and failed == 0
+    paths, failed = plan_in_order(inst, [0, 1, 2], [0], deferrals=2)
+    assert failed is None and validate(inst, None, None, paths) == []
+    res = solve_prioritized(inst)
+    assert res.solved and res.stats.hl_expanded == 1 and validate(inst, None, None, res.paths) == []
+    assert solve_prioritized(inst).paths == res.paths
+    with pytest.raises(ValueError, match="deferrals"):
+        plan_in_order(inst, [0, 1, 2], [0], deferrals=-1)

@@ -3,13 +3,15 @@
 Agents are planned one at a time in a priority order; each gets its earliest path that avoids
 every path planned before it (:func:`~agents.search.mapf.sipp.sipp`), then its path is
 reserved (:class:`~agents.search.mapf.sipp.IntervalTable`). The agents not planned yet wait
-at their starts, so their starts are kept free too (held) until they are planned; agents that
-park at or near another agent's start come after it in the order (:func:`initial_order`); an
-agent shut in by waiting agents is planned after them (:func:`plan_in_order`). Prioritised
-planning is incomplete: an agent may still find no path because earlier agents block it. When
-that happens the order is changed (the failed agent moves to the front) and planning starts
-again, up to ``restarts`` times; an agent that fails although it was first in the order ends
-planning at once, since planning is deterministic and the restart would repeat the attempt.
+at their starts, so their starts are kept free too (held) until they are planned. The first
+order releases a crowd from its edge inwards (:func:`release_order`: an agent comes after the
+agents whose starts shut it in or lie at its goal); an agent shut in by waiting agents all the
+same is planned after them (:func:`plan_in_order`). Prioritised planning is incomplete: an
+agent may still find no path because earlier agents block it. When that happens planning
+starts again in the far-first order (:func:`initial_order`), then with the failed agent moved
+to the front, up to ``restarts`` times; an agent that fails although it was first in the order
+ends planning at once, since planning is deterministic and the restart would repeat the
+attempt.
 The order is a function of the instance alone, so the same instance gives the same plan on any
 machine.
 
@@ -24,7 +26,10 @@ from __future__ import annotations
 import collections
 import heapq
 import time as _time
-from typing import List, Optional, Sequence, Set, Tuple
+from typing import Dict, List, Optional, Sequence, Set, Tuple
+
+import numpy as np
+from scipy.sparse.csgraph import breadth_first_order
 
 from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
@@ -35,6 +40,9 @@ from .solver import DEFAULT_JOINT_CHECK_STATES
 
 #: default SIPP expansions of one solve, over all agents and restarts
 DEFAULT_EXPANSION_LIMIT = 2_000_000
+#: how many times prioritised planning puts an agent shut in by waiting agents back behind
+#: them (:func:`plan_in_order`'s ``deferrals``)
+DEFAULT_DEFERRALS = 3
 #: default ``start_hold``, in moves of the graph's mean duration (30 steps on the 1000-node
 #: buffer graph, whose edges take 5 steps on average; 6 on a unit-time grid)
 DEFAULT_START_HOLD_MOVES = 6
@@ -150,10 +158,61 @@ def initial_order(inst: MapfInstance) -> List[int]:
     return order + [i for i in rank if i not in placed]
 
 
+def release_order(inst: MapfInstance) -> List[int]:
+    """The first priority order of :func:`solve_prioritized`: agents released in rounds, each
+    after the agents whose starts shut it in.
+
+    An agent not planned yet waits at its start (:func:`plan_in_order`), so its start and the
+    nodes near it are closed to the agents planned before it. An agent is released once it can
+    reach its goal (following the graph's directed edges) through nodes at or near no start of
+    an agent not released yet (its own start apart), and once its start and its goal are at or
+    near no such start; the agents released in a round follow :func:`initial_order` among themselves, and
+    the agents never released come last, in that order too. Paths of the agents planned before
+    are not looked at (prioritised planning deals with them), so the order is cheap: one
+    breadth-first search per agent and round over the nodes left open.
+    """
+    k, n = inst.n_agents, inst.n_nodes
+    base = initial_order(inst)
+    pos = {a: r for r, a in enumerate(base)}
+    near = inst.near
+    starts, goals = inst.starts, inst.goals
+    reach = [[starts[a]] + (list(near[starts[a]]) if near is not None else []) for a in range(k)]
+    cover = np.zeros(n, dtype=np.int64)  # how many unreleased agents' starts each node is at or near
+    for a in range(k):
+        cover[reach[a]] += 1
+    edges = inst.durations.tocsr()
+    left = set(range(k))
+    order: List[int] = []
+    while left:
+        ready = []
+        for a in sorted(left, key=pos.__getitem__):
+            open_ = cover == 0
+            own = np.array(reach[a])
+            open_[own[cover[own] == 1]] = True  # near a's own start only
+            g = goals[a]
+            if not (open_[g] and open_[starts[a]]):
+                continue  # the goal or the start is at or near the start of an agent still waiting
+            idx = np.flatnonzero(open_)
+            sub = np.full(n, -1, dtype=np.int64)
+            sub[idx] = np.arange(len(idx))
+            seen = breadth_first_order(edges[idx][:, idx], int(sub[starts[a]]), directed=True,
+                                       return_predecessors=False)
+            if sub[g] in set(seen.tolist()):
+                ready.append(a)
+        if not ready:
+            break
+        for a in ready:
+            left.discard(a)
+            cover[reach[a]] -= 1
+            order.append(a)
+    return order + [a for a in base if a in left]
+
+
 def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
                   budget: Optional[int] = None, deadline: Optional[float] = None,
                   start_hold: int = 0, soft: Optional[ConflictTable] = None,
-                  soft_limit: Optional[int] = None) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
+                  soft_limit: Optional[int] = None,
+                  deferrals: int = 1) -> Tuple[Optional[List[Optional[Events]]], Optional[int]]:
     """Plan agents in ``order``; returns ``(paths, None)`` or ``(None, failed agent)``.
 
     ``paths[i]`` is agent ``i``'s events. An agent not planned yet waits at its start, so its
@@ -162,7 +221,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     in the first steps, before they can get away). Only an agent that must park at or near a
     held start sees that hold end after ``start_hold`` steps (the waiting agent then has to be
     gone by the time it arrives). An agent that finds no path while shut in by agents still
-    waiting at their starts is put back behind them, once. Raises
+    waiting at their starts is put back behind them, at most ``deferrals`` times. Raises
     :class:`~agents.search.mapf.sipp.BudgetExceeded` past ``budget`` expansions and
     ``TimeoutError`` past ``deadline`` (``time.perf_counter()``).
 
@@ -173,6 +232,8 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     whose search passes that limit is reported as failed), and the later agents plan around
     it as around any other. ``soft`` then holds every agent's path.
     """
+    if isinstance(deferrals, bool) or not isinstance(deferrals, int) or deferrals < 0:
+        raise ValueError(f"deferrals must be an integer >= 0, got {deferrals!r}")
     table = IntervalTable(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
     for i in order:
@@ -181,7 +242,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
             soft.hold(i, inst.starts[i], FOREVER)
     unplanned = set(order)
     queue = collections.deque(order)
-    deferred: Set[int] = set()
+    deferred: Dict[int, int] = {}  # agent -> times put back
     while queue:
         if deadline is not None and _time.perf_counter() > deadline:
             raise TimeoutError
@@ -212,7 +273,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         waiting: Set[int] = set()
         for x in region:
             waiting |= table.holders(x)
-        if i in deferred or not waiting:
+        if deferred.get(i, 0) >= deferrals or not waiting:
             if soft is None:
                 return None, i
             soft.release(i)
@@ -223,7 +284,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
             table.reserve(i, p)
             soft.reserve(i, p)
             continue
-        deferred.add(i)
+        deferred[i] = deferred.get(i, 0) + 1
         table.hold(i, inst.starts[i], FOREVER)
         unplanned.add(i)
         ahead = [a for a in queue if a in waiting]
@@ -244,11 +305,14 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
 
     Args:
         inst: the instance (either time model, with or without proximity).
-        restarts: how many times a failed agent may be moved to the front and planning redone
-            (never for an agent already at the front: that attempt would be repeated exactly).
+        restarts: how many times planning may be redone after an agent fails: first (without
+            ``order``) in :func:`initial_order` where :func:`release_order` failed, then with
+            the failed agent moved to the front (never for an agent already at the front: that
+            attempt would be repeated exactly).
         expansion_limit: SIPP expansions over the whole solve (``None``: no limit).
         time_limit: wall-clock seconds, a safety net (``None``: none).
-        order: the first priority order (default :func:`initial_order`).
+        order: the first priority order (default :func:`release_order`, then
+            :func:`initial_order` if that fails).
         start_hold: steps ``0 .. start_hold`` for which an agent not planned yet keeps its start
             against an agent that must park at or near it (see :func:`plan_in_order`); default
             ``DEFAULT_START_HOLD_MOVES`` moves of the graph's mean duration.
@@ -281,16 +345,23 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
     reason = no_plan_reason(inst, joint_check_states)
     if reason is not None:
         return finish(CBSResult("infeasible", message=reason))
-    cur = list(order) if order is not None else initial_order(inst)
-    if sorted(cur) != list(range(k)):
-        raise ValueError(f"order must be a permutation of the {k} agents")
+    if order is not None:
+        cur = list(order)
+        if sorted(cur) != list(range(k)):
+            raise ValueError(f"order must be a permutation of the {k} agents")
+        second: Optional[List[int]] = None
+    else:
+        cur, second = release_order(inst), initial_order(inst)
+        if cur == second:
+            second = None
     counter, deadline = run.counter, run.deadline
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
     failed: Optional[int] = None
     for attempt in range(restarts + 1):
         stats.hl_expanded = attempt + 1
         try:
-            paths, failed = plan_in_order(inst, cur, counter, expansion_limit, deadline, start_hold)
+            paths, failed = plan_in_order(inst, cur, counter, expansion_limit, deadline, start_hold,
+                                          deferrals=DEFAULT_DEFERRALS)
         except BudgetExceeded:
             return finish(CBSResult("timeout", lower_bound=lb,
                                     message=f"expansion limit of {expansion_limit} reached (prioritised planning)"))
@@ -301,6 +372,9 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
             full = [p for p in paths if p is not None]
             return finish(plan_result(full, lb, f"prioritised planning ({attempt} restarts); cost not bounded"))
         assert failed is not None
+        if second is not None:  # the release order failed: the far-first order next
+            cur, second = second, None
+            continue
         if cur[0] == failed:
             # planning is deterministic: the same order would fail the same way again
             return finish(CBSResult("timeout", lower_bound=lb,
