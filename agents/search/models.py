@@ -115,8 +115,14 @@ def default_reach_threshold(model: Any) -> float:
 #: agent has hovered within 1.5 steps of the threshold for 6 steps without coming closer. On
 #: Apartment0 (5 agents, easy problems, 20 problems) ours' mean cost fell from 21.5 to 14.7. An
 #: agent that comes no closer to its target for 20 steps counts as stuck (it took the target's
-#: panorama for another place's and hovers there).
-PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6, "progress_patience": 20}
+#: panorama for another place's and hovers there). A stuck agent hands its leg to the fallback
+#: policy (where there is one) the first time it is found stuck on it, and asks for a new plan
+#: the next time (``skip_after=1``; the controller's default, 2, spends two rounds of random
+#: escapes on each): failed agents of Apartment3's 10-agent Table II runs spent 37% of their
+#: steps in escapes and fallback legs. Apartment3, seed 1, 10 agents, 50 medium and 50 hard
+#: problems: success 98% / 90% -> 100% / 92%, mean largest cost 85 / 168 -> 69 / 131.
+PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6, "progress_patience": 20,
+                                               "skip_after": 1}
 
 
 def default_hold(model: Any) -> str:

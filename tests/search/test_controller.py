@@ -301,3 +301,30 @@ def test_settling_needs_the_agent_near_now_not_only_once():
     ctrl.t = 10
     assert not ctrl._settled("agent_0", 0, 15.0)  # far now: not settled
     assert ctrl._settled("agent_0", 0, 3.6) and ctrl.stats.settled == 1  # near now, no closer for 10 steps
+
+
+def test_with_skip_after_one_a_stuck_leg_goes_to_the_fallback_at_once_and_then_to_a_replan():
+    """The panorama setting: found stuck once, the leg is handed to the fallback; stuck again (the
+    fallback pushes into the same wall), the agent asks for a new plan. The default (2) spends two
+    rounds of escapes before each of those steps."""
+    wp = np.array([[5.0, 0.2], [9.0, 9.0]], np.float32) / SIZE
+    goal = np.array([40, 40], np.float32) / SIZE
+
+    def counts(skip_after):
+        asked = []
+
+        def replan(agent, obs, plan):
+            asked.append((ctrl.t, ctrl.stats.fallbacks, ctrl.stats.escapes))
+            return AgentPlan(np.zeros((0, 2), np.float32), plan.goal)
+
+        env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
+        ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)}, reach_threshold=0.1,
+                                  safety_radius=None, replan=replan, fallback_policy=wall_pusher,
+                                  skip_after=skip_after, seed=0)
+        run(env, ctrl, limit=60)
+        return asked[0]  # (step, fallbacks, escapes) when the first new plan was asked for
+
+    t1, fallbacks1, escapes1 = counts(1)
+    t2, fallbacks2, escapes2 = counts(2)
+    assert fallbacks1 == fallbacks2 == 1  # the fallback had its turn first either way
+    assert (escapes1, escapes2) == (2, 4) and t1 < t2  # the new plan comes after half the escapes, sooner
