@@ -197,7 +197,7 @@ def release_order(inst: MapfInstance) -> List[int]:
             sub[idx] = np.arange(len(idx))
             seen = breadth_first_order(edges[idx][:, idx], int(sub[starts[a]]), directed=True,
                                        return_predecessors=False)
-            if sub[g] in set(seen.tolist()):
+            if (seen == sub[g]).any():
                 ready.append(a)
         if not ready:
             break
