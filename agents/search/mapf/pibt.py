@@ -1,0 +1,320 @@
+"""A joint stepper in the manner of priority inheritance with backtracking (PIBT): crowds that
+prioritised planning and the large-neighbourhood repair cannot untangle.
+
+Prioritised planning (:mod:`agents.search.mapf.prioritized`) plans one agent at a time and the
+repair (:mod:`agents.search.mapf.lns`) a few at a time; in a crowd where nearly every node is
+near some agent, a plan needs several agents to step out of each other's way at once. This
+module follows "Priority Inheritance with Backtracking for Iterative Multi-agent Path Finding"
+(Okumura et al.): all agents advance together, one time step after another, and at each step the
+agents decide in priority order; an agent that wants a node another agent is in the way of asks
+that agent to move away first (the other agent inherits its priority for this step), and
+backtracks to its next choice where the other cannot. An agent's priority grows with every step
+it is away from its goal and falls back when it gets there, so an agent parked at its goal is
+pushed off it by the agents that need to pass and returns later.
+
+Occupation follows :func:`~agents.search.mapf.validate.validate`'s durative model:
+
+- an agent at a node occupies it; an agent moving along ``u -> v`` (``d`` steps) occupies both
+  ``u`` and ``v`` for all ``d`` steps, then ``v`` alone;
+- two agents conflict when a node one occupies is a node the other occupies or is near it
+  (proximity); after its final arrival an agent stays at its goal.
+
+So a node ``v`` is open to an agent at ``u`` at a step when no node at or near ``v`` is occupied
+by another agent. Nothing is set free within a step (an agent that starts to move keeps its node
+until it arrives), so, unlike classic PIBT, where the pushed agent and the pusher move in the
+same step, here the pushed agent starts to move away and the pusher waits, keeping the nodes at
+and near the node it wants *claimed* for the rest of the step (no lower-priority agent may move
+there), until the node is open. An agent that is pushed first looks for an open node out of the
+claimed ones to move to at once; if there is none, it pushes in its turn. Every move starts only
+to an open node, so every step's occupation is free of conflicts, and the plan is valid by
+construction (under unit time it is conservative: the edge's far end is occupied during its one
+step too).
+
+The stepper is incomplete: it can cycle where a plan exists (it ends then with status
+``"timeout"`` when its budget is spent). Its budget is counted in work, the candidate moves
+examined (``expansion_limit``), and ties are broken by a generator seeded by ``seed``, so a
+solve is a function of the instance, the options and the seed; ``time_limit`` is only a safety
+net.
+"""
+from __future__ import annotations
+
+import random
+import sys
+from typing import Dict, List, Optional, Tuple
+
+from .instance import UNREACHABLE, MapfInstance
+from .prioritized import SolveRun, check_common_options, no_plan_reason, plan_result
+from .result import CBSResult
+from .sipp import BudgetExceeded, Events
+from .solver import DEFAULT_JOINT_CHECK_STATES
+
+__all__ = ["DEFAULT_PIBT_EXPANSION_LIMIT", "solve_pibt"]
+
+#: default candidate moves examined over one solve
+DEFAULT_PIBT_EXPANSION_LIMIT = 5_000_000
+
+
+class _Stepper:
+    """The joint state of all agents and one PIBT step over it."""
+
+    def __init__(self, inst: MapfInstance, seed: int, run: SolveRun) -> None:
+        self.inst = inst
+        self.run = run
+        n, k = inst.n_nodes, inst.n_agents
+        near = inst.near
+        self.zone: List[List[int]] = [[x] + near[x] for x in range(n)] if near is not None else [[x] for x in range(n)]
+        self.near_set: List[frozenset] = ([frozenset(near[x]) for x in range(n)] if near is not None
+                                          else [frozenset()] * n)
+        rng = random.Random(seed)
+        #: a fixed tie-break value per node and agent's rank (drawn once)
+        self.tie = [rng.random() for _ in range(n)]
+        #: the fractional part of every agent's priority: ties between agents
+        self.eps = [rng.random() for _ in range(k)]
+        self.prio = list(self.eps)
+        self.holder = [-1] * n  # the agent occupying each node (at most one)
+        self.count = [0] * n  # occupied nodes at or near each node
+        self.claim_owner = [-1] * n
+        self.claim_step = [-1] * n
+        self.decided = [-1] * k
+        self.failed = [-1] * k  # the step at which an agent pushed off its node could not leave
+        self.pos = list(inst.starts)
+        self.target = [-1] * k  # where a moving agent goes (-1: at its node)
+        self.arrival = [0] * k
+        self.events: List[Events] = [[(s, 0)] for s in inst.starts]
+        self.cands: Dict[Tuple[int, int], List[Tuple[int, int, int]]] = {}
+        self.step = 0
+        self.moves = 0
+
+    # ------------------------------------------------------------------ occupation
+    def occupy(self, a: int, x: int) -> None:
+        self.holder[x] = a
+        count = self.count
+        for y in self.zone[x]:
+            count[y] += 1
+
+    def vacate(self, x: int) -> None:
+        self.holder[x] = -1
+        count = self.count
+        for y in self.zone[x]:
+            count[y] -= 1
+
+    def candidates(self, a: int, u: int) -> List[Tuple[int, int, int]]:
+        """``(rank key, node, duration)`` for ``a`` at ``u``: its moves, best first by the steps
+        to its goal through them, and waiting (key: one step more than the distance from ``u``)."""
+        key = (a, u)
+        c = self.cands.get(key)
+        if c is None:
+            h = self.inst.h[a]
+            unit = self.inst.unit
+            tie = self.tie
+            opts = [(h[u] + 1, u, 1)]
+            for v, d in self.inst.succ_d[u][1:]:
+                if h[v] < UNREACHABLE:
+                    d = 1 if unit else d
+                    opts.append((d + h[v], v, d))
+            opts.sort(key=lambda o: (o[0], o[1] != u, tie[o[1]]))
+            c = opts
+            self.cands[key] = c
+        return c
+
+    # ------------------------------------------------------------------ claims of one step
+    def claimed_by_other(self, x: int, a: int) -> bool:
+        return self.claim_step[x] == self.step and self.claim_owner[x] != a
+
+    def claim(self, a: int, v: int) -> List[int]:
+        """Claim the nodes at and near ``v`` for ``a`` (those nobody claimed yet this step)."""
+        got = []
+        step = self.step
+        for y in self.zone[v]:
+            if self.claim_step[y] != step:
+                self.claim_step[y] = step
+                self.claim_owner[y] = a
+                got.append(y)
+        return got
+
+    def unclaim(self, nodes: List[int]) -> None:
+        for y in nodes:
+            self.claim_step[y] = -1
+
+    def is_open(self, a: int, u: int, v: int) -> bool:
+        """Whether no other agent occupies a node at or near ``v`` (``a`` is at ``u``)."""
+        own = 1 if v in self.near_set[u] else 0
+        return self.count[v] == own
+
+    def start_move(self, a: int, v: int, d: int) -> None:
+        self.target[a] = v
+        self.arrival[a] = self.step + d
+        self.occupy(a, v)
+        self.moves += 1
+
+    # ------------------------------------------------------------------ one agent's decision
+    def pibt(self, a: int) -> bool:
+        """Decide ``a``'s action at this step: move to an open node, wait, or wait while the agents
+        in the way of the node it wants move off (pushed in their turn). ``False``: ``a`` was
+        pushed off its node and can do none of this."""
+        self.decided[a] = self.step
+        u = self.pos[a]
+        pushed = self.claimed_by_other(u, a)
+        counter = self.run.counter
+        cands = self.candidates(a, u)
+        if pushed:  # first any open node out of the claimed ones, at once
+            for _, v, d in cands:
+                counter[0] += 1
+                if v != u and not self.claimed_by_other(v, a) and self.is_open(a, u, v):
+                    self.start_move(a, v, d)
+                    return True
+        for _, v, d in cands:
+            counter[0] += 1
+            if v == u:
+                if pushed:
+                    continue
+                return True  # waiting is better than what is left
+            if self.claimed_by_other(v, a):
+                continue
+            if self.is_open(a, u, v):
+                self.start_move(a, v, d)
+                return True
+            blockers = []
+            ok = True
+            for y in self.zone[v]:
+                b = self.holder[y]
+                if b < 0 or b == a or b in blockers:
+                    continue
+                if self.target[b] >= 0:
+                    continue  # moving: it will leave (or be asked to at its arrival)
+                if self.decided[b] == self.step:
+                    ok = False  # decided to stay this step
+                    break
+                blockers.append(b)
+            if not ok:
+                continue
+            mine = self.claim(a, v)
+            for b in blockers:
+                if self.decided[b] == self.step:  # decided in the meantime, pushed by another
+                    if self.failed[b] == self.step:
+                        ok = False
+                        break
+                    continue
+                if not self.pibt(b):
+                    ok = False
+                    break
+            if ok:
+                return True  # wait here until the node is open
+            self.unclaim(mine)
+        self.failed[a] = self.step
+        return False
+
+    # ------------------------------------------------------------------ the joint step
+    def advance(self) -> bool:
+        """One time step of every agent; ``True`` once every agent is at its goal and not moving."""
+        step = self.step
+        goals = self.inst.goals
+        pos, target, events = self.pos, self.target, self.events
+        for a in range(len(pos)):
+            if target[a] >= 0 and self.arrival[a] == step:
+                self.vacate(pos[a])
+                pos[a] = target[a]
+                target[a] = -1
+                events[a].append((pos[a], step))
+        if all(target[a] < 0 and pos[a] == goals[a] for a in range(len(pos))):
+            return True
+        prio, eps = self.prio, self.eps
+        free = []
+        for a in range(len(pos)):
+            if target[a] < 0:
+                if pos[a] == goals[a]:
+                    prio[a] = eps[a]
+                else:
+                    prio[a] += 1.0
+                free.append(a)
+            else:
+                prio[a] += 1.0
+        free.sort(key=lambda a: -prio[a])
+        for a in free:
+            if self.decided[a] != step:
+                self.pibt(a)
+        for a in free:
+            if target[a] < 0:
+                events[a].append((pos[a], step + 1))
+        self.step += 1
+        return False
+
+    def paths(self) -> List[Events]:
+        """Each agent's events up to its final arrival (the trailing wait at its goal dropped)."""
+        out = []
+        for ev in self.events:
+            ev = list(ev)
+            while len(ev) >= 2 and ev[-1][0] == ev[-2][0]:
+                ev.pop()
+            out.append(ev)
+        return out
+
+
+def _overlap(inst: MapfInstance, nodes: Tuple[int, ...], what: str) -> Optional[str]:
+    """Why agents at ``nodes`` (starts or goals) conflict among themselves, if they do."""
+    near = inst.near_mat
+    if near is None:
+        return None
+    idx = {v: i for i, v in enumerate(nodes)}
+    for i, v in enumerate(nodes):
+        for w in inst.near[v] if inst.near is not None else ():
+            j = idx.get(w)
+            if j is not None and j > i:
+                return f"the {what}s of agents {i} and {j} are within the proximity radius of each other"
+    return None
+
+
+def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_PIBT_EXPANSION_LIMIT,
+               time_limit: Optional[float] = None, seed: int = 0,
+               joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
+    """Step all agents together by priority inheritance with backtracking; a :class:`CBSResult`.
+
+    Args:
+        inst: the instance (either time model, with or without proximity).
+        expansion_limit: candidate moves examined over the whole solve (``None``: no limit);
+            reaching it ends the solve with status ``"timeout"``. Every step examines at least
+            one, so it also bounds the makespan.
+        time_limit: wall-clock seconds, a safety net (``None``: none).
+        seed: seeds the tie-breaks (between agents of equal priority and between equally good
+            moves); the same seed, the same plan.
+        joint_check_states: as for :func:`~agents.search.mapf.prioritized.solve_prioritized`: a
+            small impossible part of the instance is reported ``"infeasible"`` before stepping.
+
+    Returns:
+        status ``"suboptimal"`` (or ``"optimal"`` where the sum of costs equals the lower bound)
+        with conflict-free paths, ``"timeout"`` (the message says which limit and how many agents
+        were at their goals), or ``"infeasible"`` when some agent's goal cannot be reached from
+        its start even alone, two starts or two goals are within the proximity radius of each
+        other, or the joint check proves that no plan exists.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    check_common_options(expansion_limit, time_limit, joint_check_states)
+    run = SolveRun(expansion_limit, time_limit)
+    k = inst.n_agents
+    reason = (_overlap(inst, inst.starts, "start") or _overlap(inst, inst.goals, "goal")
+              or no_plan_reason(inst, joint_check_states))
+    if reason is not None:
+        return run.finish(inst, CBSResult("infeasible", message=reason))
+    lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
+    st = _Stepper(inst, seed, run)
+    for a, s in enumerate(inst.starts):
+        st.occupy(a, s)
+    limit = sys.getrecursionlimit()
+    if limit < 4 * k + 100:
+        sys.setrecursionlimit(4 * k + 100)
+    try:
+        while not st.advance():
+            run.check_limits()
+    except (BudgetExceeded, TimeoutError) as exc:
+        home = sum(1 for a in range(k) if st.target[a] < 0 and st.pos[a] == inst.goals[a])
+        which = (f"expansion limit of {expansion_limit}" if isinstance(exc, BudgetExceeded)
+                 else f"time limit of {time_limit:g} s")
+        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+            f"{which} reached (priority inheritance stepper, step {st.step}; {home} of {k} agents at their goals)")))
+    finally:
+        sys.setrecursionlimit(limit)
+    run.stats.hl_expanded = st.step
+    run.stats.ll_calls = st.moves
+    return run.finish(inst, plan_result(st.paths(), lb, (
+        f"priority inheritance stepper: {st.step} steps, {st.moves} moves; cost not bounded")))
