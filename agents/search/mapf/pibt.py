@@ -42,6 +42,9 @@ import random
 import sys
 from typing import Dict, List, Optional, Tuple
 
+import numpy as np
+from scipy.sparse.csgraph import breadth_first_order, connected_components, dijkstra
+
 from .instance import UNREACHABLE, MapfInstance
 from .prioritized import SolveRun, check_common_options, no_plan_reason, plan_result
 from .result import CBSResult
@@ -81,9 +84,27 @@ class _Stepper:
         self.target = [-1] * k  # where a moving agent goes (-1: at its node)
         self.arrival = [0] * k
         self.events: List[Events] = [[(s, 0)] for s in inst.starts]
-        self.cands: Dict[Tuple[int, int], List[Tuple[int, int, int]]] = {}
+        #: per agent, its candidates at each node (for its current distances)
+        self.cands: List[Dict[int, List[Tuple[int, int, int]]]] = [{} for _ in range(k)]
         self.step = 0
         self.moves = 0
+        # An agent whose goal has no way out stays there for good once it arrives: the nodes at
+        # and near that goal are closed to everybody else from then on.
+        self.final = [len(inst.succ_d[g]) == 1 for g in inst.goals]
+        self.parked = [False] * k
+        self.closed = np.zeros(n, dtype=bool)
+        self.version = 0  # how many times nodes were closed
+        self.edges = inst.durations.tocsr()
+        self.reverse = self.edges.T.tocsr()
+        self.reverse_rows = np.repeat(np.arange(n), np.diff(self.reverse.indptr))
+        self.reduced = self.reverse
+        self.reverse_version = 0
+        self.h: List[List[int]] = list(inst.h)
+        self.h_version = [0] * k
+        #: per agent, (version, step) of its last refused arrival at its final goal
+        self.refused: List[Tuple[int, int]] = [(-1, -1)] * k
+        self.parking_checks = 0
+        self.replans = 0
 
     # ------------------------------------------------------------------ occupation
     def occupy(self, a: int, x: int) -> None:
@@ -101,21 +122,82 @@ class _Stepper:
     def candidates(self, a: int, u: int) -> List[Tuple[int, int, int]]:
         """``(rank key, node, duration)`` for ``a`` at ``u``: its moves, best first by the steps
         to its goal through them, and waiting (key: one step more than the distance from ``u``)."""
-        key = (a, u)
-        c = self.cands.get(key)
+        mine = self.cands[a]
+        c = mine.get(u)
         if c is None:
-            h = self.inst.h[a]
+            h = self.h[a]
             unit = self.inst.unit
             tie = self.tie
+            closed = self.closed
             opts = [(h[u] + 1, u, 1)]
             for v, d in self.inst.succ_d[u][1:]:
-                if h[v] < UNREACHABLE:
+                if h[v] < UNREACHABLE and not closed[v]:
                     d = 1 if unit else d
                     opts.append((d + h[v], v, d))
             opts.sort(key=lambda o: (o[0], o[1] != u, tie[o[1]]))
             c = opts
-            self.cands[key] = c
+            mine[u] = c
         return c
+
+    # ------------------------------------------------------------------ final goals
+    def refresh(self, a: int) -> bool:
+        """Recompute ``a``'s distances around the closed nodes if some were closed since it last
+        did; ``True`` if they changed."""
+        if self.h_version[a] == self.version:
+            return False
+        self.h_version[a] = self.version
+        if self.reverse_version != self.version:  # the reversed graph without the closed nodes
+            keep = ~self.closed
+            m = self.reverse.copy()
+            m.data[~(keep[self.reverse_rows] & keep[m.indices])] = 0
+            m.eliminate_zeros()  # (an explicit zero would be an edge of length 0)
+            self.reduced = m
+            self.reverse_version = self.version
+        dist = dijkstra(self.reduced, directed=True, indices=[self.inst.goals[a]], unweighted=self.inst.unit)[0]
+        self.h[a] = np.where(np.isfinite(dist), dist, UNREACHABLE).astype(np.int64).tolist()
+        self.cands[a] = {}
+        self.replans += 1
+        return True
+
+    def may_park(self, a: int) -> bool:
+        """Whether ``a`` may arrive at its final goal for good: every other agent not parked can
+        still reach its goal (along the graph's edges) with the nodes at and near that goal closed."""
+        step = self.step
+        if self.refused[a] == (self.version, step // 8):
+            return False  # refused at this version recently: ask again a few steps later
+        self.parking_checks += 1
+        goals = self.inst.goals
+        keep = ~self.closed
+        keep[self.zone[goals[a]]] = False
+        idx = np.flatnonzero(keep)
+        inv = np.full(len(keep), -1, dtype=np.int64)
+        inv[idx] = np.arange(len(idx))
+        sub = self.edges[idx][:, idx].tocsr()
+        _, labels = connected_components(sub, directed=True, connection="strong")
+        big = labels == np.bincount(labels).argmax()
+        others = [b for b in range(len(goals)) if b != a and not self.parked[b]]
+        if not others:
+            return True
+        src = inv[[self.target[b] if self.target[b] >= 0 else self.pos[b] for b in others]]
+        dst = inv[[goals[b] for b in others]]
+        if (src < 0).any() or (dst < 0).any():
+            self.refused[a] = (self.version, step // 8)
+            return False
+        bigf = big.astype(np.float64)
+        out_ok = big[src] | (sub[src] @ bigf > 0)
+        in_ok = big[dst] | (sub.T.tocsr()[dst] @ bigf > 0)
+        for j in np.flatnonzero(~(out_ok & in_ok)):
+            seen = breadth_first_order(sub, int(src[j]), directed=True, return_predecessors=False)
+            if not (seen == dst[j]).any():
+                self.refused[a] = (self.version, step // 8)
+                return False
+        return True
+
+    def park(self, a: int) -> None:
+        """``a`` has arrived at its final goal for good: close the nodes at and near it."""
+        self.parked[a] = True
+        self.closed[self.zone[self.inst.goals[a]]] = True
+        self.version += 1
 
     # ------------------------------------------------------------------ claims of one step
     def claimed_by_other(self, x: int, a: int) -> bool:
@@ -160,7 +242,8 @@ class _Stepper:
         if pushed:  # first any open node out of the claimed ones, at once
             for _, v, d in cands:
                 counter[0] += 1
-                if v != u and not self.claimed_by_other(v, a) and self.is_open(a, u, v):
+                if v != u and not self.claimed_by_other(v, a) and self.is_open(a, u, v) \
+                        and not (v == self.inst.goals[a] and self.final[a] and not self.may_park(a)):
                     self.start_move(a, v, d)
                     return True
         for _, v, d in cands:
@@ -168,10 +251,14 @@ class _Stepper:
             if v == u:
                 if pushed:
                     continue
+                if self.refresh(a):  # nodes were closed since: look again with the new distances
+                    return self.pibt(a)
                 return True  # waiting is better than what is left
             if self.claimed_by_other(v, a):
                 continue
             if self.is_open(a, u, v):
+                if v == self.inst.goals[a] and self.final[a] and not self.may_park(a):
+                    continue
                 self.start_move(a, v, d)
                 return True
             blockers = []
@@ -216,13 +303,18 @@ class _Stepper:
                 pos[a] = target[a]
                 target[a] = -1
                 events[a].append((pos[a], step))
+                if self.final[a] and pos[a] == goals[a]:
+                    self.park(a)
         if all(target[a] < 0 and pos[a] == goals[a] for a in range(len(pos))):
             return True
         prio, eps = self.prio, self.eps
         free = []
+        parked = self.parked
         for a in range(len(pos)):
+            if parked[a]:
+                continue
             if target[a] < 0:
-                if pos[a] == goals[a]:
+                if pos[a] == goals[a] or self.refused[a][0] == self.version:
                     prio[a] = eps[a]
                 else:
                     prio[a] += 1.0
