@@ -230,10 +230,42 @@ class _Stepper:
         self.moves += 1
 
     # ------------------------------------------------------------------ one agent's decision
+    def can_enter(self, a: int, u: int, v: int) -> bool:
+        """Whether ``a`` at ``u`` may start to move to ``v`` now: ``v`` is open, not claimed by
+        another agent, and, if it is ``a``'s final goal, nobody else needs the nodes around it."""
+        if self.claimed_by_other(v, a) or not self.is_open(a, u, v):
+            return False
+        return not (v == self.inst.goals[a] and self.final[a] and not self.may_park(a))
+
+    def push(self, a: int, v: int) -> bool:
+        """``a`` wants ``v``, where other agents are in the way: claim the nodes at and near ``v``
+        and push the agents at them that are not moving (each must move off in its turn).
+        ``True`` if every one of them can; ``a`` then waits until ``v`` is open."""
+        blockers: List[int] = []
+        step = self.step
+        for y in self.zone[v]:
+            b = self.holder[y]
+            if b < 0 or b == a or b in blockers or self.target[b] >= 0:
+                continue  # nobody, or moving: it will leave (or be pushed when it arrives)
+            if self.decided[b] == step:
+                return False  # it has decided to stay this step
+            blockers.append(b)
+        mine = self.claim(a, v)
+        for b in blockers:
+            if self.decided[b] == step:  # decided in the meantime, pushed by another agent
+                ok = self.failed[b] != step
+            else:
+                ok = self.pibt(b)
+            if not ok:
+                self.unclaim(mine)
+                return False
+        return True
+
     def pibt(self, a: int) -> bool:
         """Decide ``a``'s action at this step: move to an open node, wait, or wait while the agents
-        in the way of the node it wants move off (pushed in their turn). ``False``: ``a`` was
-        pushed off its node and can do none of this."""
+        in the way of the node it wants move off (pushed in their turn). Candidates are taken
+        best first; among equally good ones, open nodes before nodes that need a push.
+        ``False``: ``a`` was pushed off its node and can do none of this."""
         self.decided[a] = self.step
         u = self.pos[a]
         pushed = self.claimed_by_other(u, a)
@@ -242,52 +274,31 @@ class _Stepper:
         if pushed:  # first any open node out of the claimed ones, at once
             for _, v, d in cands:
                 counter[0] += 1
-                if v != u and not self.claimed_by_other(v, a) and self.is_open(a, u, v) \
-                        and not (v == self.inst.goals[a] and self.final[a] and not self.may_park(a)):
+                if v != u and self.can_enter(a, u, v):
                     self.start_move(a, v, d)
                     return True
-        for _, v, d in cands:
-            counter[0] += 1
-            if v == u:
-                if pushed:
-                    continue
-                if self.refresh(a):  # nodes were closed since: look again with the new distances
-                    return self.pibt(a)
-                return True  # waiting is better than what is left
-            if self.claimed_by_other(v, a):
-                continue
-            if self.is_open(a, u, v):
-                if v == self.inst.goals[a] and self.final[a] and not self.may_park(a):
-                    continue
-                self.start_move(a, v, d)
-                return True
-            blockers = []
-            ok = True
-            for y in self.zone[v]:
-                b = self.holder[y]
-                if b < 0 or b == a or b in blockers:
-                    continue
-                if self.target[b] >= 0:
-                    continue  # moving: it will leave (or be asked to at its arrival)
-                if self.decided[b] == self.step:
-                    ok = False  # decided to stay this step
-                    break
-                blockers.append(b)
-            if not ok:
-                continue
-            mine = self.claim(a, v)
-            for b in blockers:
-                if self.decided[b] == self.step:  # decided in the meantime, pushed by another
-                    if self.failed[b] == self.step:
-                        ok = False
-                        break
-                    continue
-                if not self.pibt(b):
-                    ok = False
-                    break
-            if ok:
-                return True  # wait here until the node is open
-            self.unclaim(mine)
+        i, m = 0, len(cands)
+        while i < m:
+            j = i + 1
+            while j < m and cands[j][0] == cands[i][0]:
+                j += 1
+            group = cands[i:j]
+            i = j
+            for _, v, d in group:
+                counter[0] += 1
+                if v == u:
+                    if pushed:
+                        continue
+                    if self.refresh(a):  # nodes were closed since: look again with the new distances
+                        return self.pibt(a)
+                    return True  # waiting is better than what is left
+                if not pushed and self.can_enter(a, u, v):
+                    self.start_move(a, v, d)
+                    return True
+            for _, v, d in group:
+                counter[0] += 1
+                if v != u and not self.claimed_by_other(v, a) and not self.is_open(a, u, v) and self.push(a, v):
+                    return True  # wait here until v is open
         self.failed[a] = self.step
         return False
 
