@@ -9,11 +9,14 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
   median sum of costs, per solver, without the planner's fallback:
 
   - ``auto``: the planner's default (ECBS w = 1.1 up to 20 agents, prioritised planning with
-    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget);
+    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget, the
+    priority inheritance stepper where prioritised planning gives up);
   - ``prioritized``: prioritised planning alone;
   - ``lns``: the large-neighbourhood repair alone (a prioritised plan whose stuck agents take
     their least conflicting paths, then small groups of agents re-planned until no conflict is
     left);
+  - ``pibt``: the priority inheritance stepper alone (all agents step together; an agent in the
+    way of a more urgent one is pushed off its node);
   - ``ecbs``: ECBS w = 1.1; ``cbs``: optimal CBS; ``cbs-unit``: optimal CBS with unit-time
     edges (the paper's time model: every edge one step).
 
@@ -50,6 +53,7 @@ SOLVER_OPTIONS = {
     "auto": dict(solver="auto"),
     "prioritized": dict(solver="prioritized"),
     "lns": dict(solver="lns"),
+    "pibt": dict(solver="pibt"),
     "ecbs": dict(solver="cbs", suboptimality=1.1),
     "cbs": dict(solver="cbs", suboptimality=1.0),
     "cbs-unit": dict(solver="cbs", suboptimality=1.0, time_model="unit"),

@@ -295,7 +295,7 @@ class _Stepper:
                 if not pushed and self.can_enter(a, u, v):
                     self.start_move(a, v, d)
                     return True
-            for _, v, d in group:
+            for _, v, _d in group:
                 counter[0] += 1
                 if v != u and not self.claimed_by_other(v, a) and not self.is_open(a, u, v) and self.push(a, v):
                     return True  # wait here until v is open
