@@ -55,12 +55,15 @@ __all__ = ["DEFAULT_PIBT_EXPANSION_LIMIT", "solve_pibt"]
 
 #: default candidate moves examined over one solve
 DEFAULT_PIBT_EXPANSION_LIMIT = 5_000_000
+#: default ``patience``: steps without getting closer to its goal after which an agent would
+#: rather move anywhere than wait
+DEFAULT_PATIENCE = 5
 
 
 class _Stepper:
     """The joint state of all agents and one PIBT step over it."""
 
-    def __init__(self, inst: MapfInstance, seed: int, run: SolveRun) -> None:
+    def __init__(self, inst: MapfInstance, seed: int, run: SolveRun, patience: int = 20) -> None:
         self.inst = inst
         self.run = run
         n, k = inst.n_nodes, inst.n_agents
@@ -103,6 +106,10 @@ class _Stepper:
         self.h_version = [0] * k
         #: per agent, (version, step) of its last refused arrival at its final goal
         self.refused: List[Tuple[int, int]] = [(-1, -1)] * k
+        self.patience = patience
+        #: per agent, the least distance to its goal so far and the step it got there
+        self.best = [inst.h[a][s] for a, s in enumerate(inst.starts)]
+        self.progress = [0] * k
         self.parking_checks = 0
         self.replans = 0
 
@@ -157,6 +164,8 @@ class _Stepper:
         self.h[a] = np.where(np.isfinite(dist), dist, UNREACHABLE).astype(np.int64).tolist()
         self.cands[a] = {}
         self.replans += 1
+        self.best[a] = self.h[a][self.pos[a]]
+        self.progress[a] = self.step
         return True
 
     def may_park(self, a: int) -> bool:
@@ -269,6 +278,8 @@ class _Stepper:
         self.decided[a] = self.step
         u = self.pos[a]
         pushed = self.claimed_by_other(u, a)
+        # no progress for a while: waiting comes last, after every move and push
+        restless = not pushed and self.step - self.progress[a] >= self.patience and u != self.inst.goals[a]
         counter = self.run.counter
         cands = self.candidates(a, u)
         if pushed:  # first any open node out of the claimed ones, at once
@@ -284,17 +295,24 @@ class _Stepper:
                 j += 1
             group = cands[i:j]
             i = j
+            stay = False
             for _, v, d in group:
                 counter[0] += 1
                 if v == u:
                     if pushed:
                         continue
-                    if self.refresh(a):  # nodes were closed since: look again with the new distances
-                        return self.pibt(a)
-                    return True  # waiting is better than what is left
-                if not pushed and self.can_enter(a, u, v):
+                    if not restless:  # waiting first among equals
+                        if self.refresh(a):  # nodes were closed since: look again with the new distances
+                            return self.pibt(a)
+                        return True
+                    stay = True
+                elif not pushed and self.can_enter(a, u, v):
                     self.start_move(a, v, d)
                     return True
+            if stay:  # waiting is better than what is left (and as good as the pushes left)
+                if self.refresh(a):  # nodes were closed since: look again with the new distances
+                    return self.pibt(a)
+                return True
             for _, v, _d in group:
                 counter[0] += 1
                 if v != u and not self.claimed_by_other(v, a) and not self.is_open(a, u, v) and self.push(a, v):
@@ -325,6 +343,10 @@ class _Stepper:
             if parked[a]:
                 continue
             if target[a] < 0:
+                dist = self.h[a][pos[a]]
+                if dist < self.best[a] or dist == 0:
+                    self.best[a] = dist
+                    self.progress[a] = step
                 if pos[a] == goals[a] or self.refused[a][0] == self.version:
                     prio[a] = eps[a]
                 else:
@@ -368,7 +390,7 @@ def _overlap(inst: MapfInstance, nodes: Tuple[int, ...], what: str) -> Optional[
 
 
 def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_PIBT_EXPANSION_LIMIT,
-               time_limit: Optional[float] = None, seed: int = 0,
+               time_limit: Optional[float] = None, seed: int = 0, patience: int = DEFAULT_PATIENCE,
                joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
     """Step all agents together by priority inheritance with backtracking; a :class:`CBSResult`.
 
@@ -400,7 +422,7 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
     if reason is not None:
         return run.finish(inst, CBSResult("infeasible", message=reason))
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
-    st = _Stepper(inst, seed, run)
+    st = _Stepper(inst, seed, run, patience)
     for a, s in enumerate(inst.starts):
         st.occupy(a, s)
     limit = sys.getrecursionlimit()
