@@ -58,6 +58,12 @@ DEFAULT_PIBT_EXPANSION_LIMIT = 5_000_000
 #: default ``patience``: steps without getting closer to its goal after which an agent would
 #: rather move anywhere than wait
 DEFAULT_PATIENCE = 5
+#: default ``stall_moves``: moves of the longest edge without a new high of agents at their
+#: goals after which a run is given up (100 on the 1000-node buffer graph: 700 steps, where the
+#: runs that succeed go at most 115 steps without one)
+DEFAULT_STALL_MOVES = 100
+#: default ``restarts``
+DEFAULT_RESTARTS = 20
 
 
 class _Stepper:
@@ -391,17 +397,25 @@ def _overlap(inst: MapfInstance, nodes: Tuple[int, ...], what: str) -> Optional[
 
 def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_PIBT_EXPANSION_LIMIT,
                time_limit: Optional[float] = None, seed: int = 0, patience: int = DEFAULT_PATIENCE,
+               stall_moves: int = DEFAULT_STALL_MOVES, restarts: int = DEFAULT_RESTARTS,
                joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
     """Step all agents together by priority inheritance with backtracking; a :class:`CBSResult`.
 
     Args:
         inst: the instance (either time model, with or without proximity).
-        expansion_limit: candidate moves examined over the whole solve (``None``: no limit);
-            reaching it ends the solve with status ``"timeout"``. Every step examines at least
-            one, so it also bounds the makespan.
+        expansion_limit: candidate moves examined over the whole solve, restarts included
+            (``None``: no limit); reaching it ends the solve with status ``"timeout"``. Every
+            step examines at least one, so it also bounds the makespan.
         time_limit: wall-clock seconds, a safety net (``None``: none).
         seed: seeds the tie-breaks (between agents of equal priority and between equally good
-            moves); the same seed, the same plan.
+            moves) and those of the restarts; the same seed, the same plan.
+        patience: steps without getting closer to its goal after which an agent moves rather
+            than waits where a move is as good as waiting (0: always).
+        stall_moves: a run in which the number of agents at their goals has not reached a new
+            high for this many moves of the graph's longest edge (in steps: ``stall_moves`` x
+            the longest duration) is given up and the stepping starts again from the starts with
+            other tie-breaks.
+        restarts: how many times the stepping may start again.
         joint_check_states: as for :func:`~agents.search.mapf.prioritized.solve_prioritized`: a
             small impossible part of the instance is reported ``"infeasible"`` before stepping.
 
@@ -414,6 +428,11 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
     """
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ValueError(f"seed must be an integer, got {seed!r}")
+    for name, value in (("patience", patience), ("restarts", restarts)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    if isinstance(stall_moves, bool) or not isinstance(stall_moves, int) or stall_moves < 1:
+        raise ValueError(f"stall_moves must be an integer >= 1, got {stall_moves!r}")
     check_common_options(expansion_limit, time_limit, joint_check_states)
     run = SolveRun(expansion_limit, time_limit)
     k = inst.n_agents
@@ -422,24 +441,44 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
     if reason is not None:
         return run.finish(inst, CBSResult("infeasible", message=reason))
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
-    st = _Stepper(inst, seed, run, patience)
-    for a, s in enumerate(inst.starts):
-        st.occupy(a, s)
+    stall = stall_moves * (1 if inst.unit else inst.max_duration)
+    seeds = random.Random(seed)
     limit = sys.getrecursionlimit()
     if limit < 4 * k + 100:
         sys.setrecursionlimit(4 * k + 100)
+    attempt = 0
+    goals = inst.goals
     try:
-        while not st.advance():
-            run.check_limits()
+        while True:
+            st = _Stepper(inst, seed if attempt == 0 else seeds.getrandbits(32), run, patience)
+            for a, s in enumerate(inst.starts):
+                st.occupy(a, s)
+            best, since = -1, 0
+            while not st.advance():
+                run.check_limits()
+                home = sum(1 for a in range(k) if st.target[a] < 0 and st.pos[a] == goals[a])
+                if home > best:
+                    best, since = home, st.step
+                elif st.step - since > stall:
+                    break
+            else:
+                break  # every agent at its goal
+            if attempt == restarts:
+                return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+                    f"priority inheritance stepper: {attempt + 1} runs stalled (the last with {best} of {k} "
+                    f"agents at their goals, none more for {stall} steps)")))
+            attempt += 1
     except (BudgetExceeded, TimeoutError) as exc:
-        home = sum(1 for a in range(k) if st.target[a] < 0 and st.pos[a] == inst.goals[a])
+        home = sum(1 for a in range(k) if st.target[a] < 0 and st.pos[a] == goals[a])
         which = (f"expansion limit of {expansion_limit}" if isinstance(exc, BudgetExceeded)
                  else f"time limit of {time_limit:g} s")
         return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
-            f"{which} reached (priority inheritance stepper, step {st.step}; {home} of {k} agents at their goals)")))
+            f"{which} reached (priority inheritance stepper, run {attempt + 1}, step {st.step}; "
+            f"{home} of {k} agents at their goals)")))
     finally:
         sys.setrecursionlimit(limit)
     run.stats.hl_expanded = st.step
+    run.stats.hl_generated = attempt  # restarts
     run.stats.ll_calls = st.moves
     return run.finish(inst, plan_result(st.paths(), lb, (
-        f"priority inheritance stepper: {st.step} steps, {st.moves} moves; cost not bounded")))
+        f"priority inheritance stepper: {st.step} steps, {st.moves} moves, {attempt} restarts; cost not bounded")))
