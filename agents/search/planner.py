@@ -71,7 +71,7 @@ DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_500
 #: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
 DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 #: default ``stepper_expansions_per_agent``: the priority inheritance stepper's budget per agent
-#: (222 agents on the 1000-node buffer graph take 1,600 to 1,900 per agent)
+#: (222 agents on the 1000-node buffer graph take 2,300 to 2,600 per agent)
 DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
 
 
