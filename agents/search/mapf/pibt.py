@@ -30,11 +30,24 @@ to an open node, so every step's occupation is free of conflicts, and the plan i
 construction (under unit time it is conservative: the edge's far end is occupied during its one
 step too).
 
-The stepper is incomplete: it can cycle where a plan exists (it ends then with status
-``"timeout"`` when its budget is spent). Its budget is counted in work, the candidate moves
-examined (``expansion_limit``), and ties are broken by a generator seeded by ``seed``, so a
-solve is a function of the instance, the options and the seed; ``time_limit`` is only a safety
-net.
+Three more rules make it work on the planner's graphs:
+
+- an agent whose goal has no way out (no edge leaves it: the goals attached to the buffer graph)
+  stays there for good once it arrives, and the nodes at and near its goal are closed to everybody
+  else; it may arrive only where every other agent not parked yet can still reach its goal
+  through the nodes left open, else it waits at the lowest priority so that the others push it
+  aside; an agent about to wait recomputes its distances around the nodes closed since it last
+  did;
+- an agent that has not come closer to its goal for ``patience`` steps takes a move that is as
+  good as waiting instead of waiting (two agents waiting for each other would otherwise stay);
+- a run in which no new high of agents at their goals is reached for ``stall_moves`` moves of
+  the longest edge is given up and the stepping starts again from the starts with other
+  tie-breaks, up to ``restarts`` times.
+
+The stepper is incomplete all the same: it can fail where a plan exists (status ``"timeout"``).
+Its budget is counted in work, the candidate moves examined over all runs (``expansion_limit``),
+and ties are broken by a generator seeded by ``seed``, so a solve is a function of the instance,
+the options and the seed; ``time_limit`` is only a safety net.
 """
 from __future__ import annotations
 
@@ -55,8 +68,8 @@ __all__ = ["DEFAULT_PIBT_EXPANSION_LIMIT", "solve_pibt"]
 
 #: default candidate moves examined over one solve
 DEFAULT_PIBT_EXPANSION_LIMIT = 5_000_000
-#: default ``patience``: steps without getting closer to its goal after which an agent would
-#: rather move anywhere than wait
+#: default ``patience``: steps without getting closer to its goal after which an agent takes a
+#: move as good as waiting rather than wait
 DEFAULT_PATIENCE = 5
 #: default ``stall_moves``: moves of the longest edge without a new high of agents at their
 #: goals after which a run is given up (100 on the 1000-node buffer graph: 700 steps, where the
@@ -69,7 +82,7 @@ DEFAULT_RESTARTS = 20
 class _Stepper:
     """The joint state of all agents and one PIBT step over it."""
 
-    def __init__(self, inst: MapfInstance, seed: int, run: SolveRun, patience: int = 20) -> None:
+    def __init__(self, inst: MapfInstance, seed: int, run: SolveRun, patience: int = DEFAULT_PATIENCE) -> None:
         self.inst = inst
         self.run = run
         n, k = inst.n_nodes, inst.n_agents
@@ -78,7 +91,7 @@ class _Stepper:
         self.near_set: List[frozenset] = ([frozenset(near[x]) for x in range(n)] if near is not None
                                           else [frozenset()] * n)
         rng = random.Random(seed)
-        #: a fixed tie-break value per node and agent's rank (drawn once)
+        #: a fixed tie-break value per node, between equally good moves (drawn once)
         self.tie = [rng.random() for _ in range(n)]
         #: the fractional part of every agent's priority: ties between agents
         self.eps = [rng.random() for _ in range(k)]
@@ -110,7 +123,8 @@ class _Stepper:
         self.reverse_version = 0
         self.h: List[List[int]] = list(inst.h)
         self.h_version = [0] * k
-        #: per agent, (version, step) of its last refused arrival at its final goal
+        #: per agent, (closing version, step // 8) of its last refused arrival at its final goal: it
+        #: asks again 8 steps later at the latest, or as soon as more nodes are closed
         self.refused: List[Tuple[int, int]] = [(-1, -1)] * k
         self.patience = patience
         #: per agent, the least distance to its goal so far and the step it got there
