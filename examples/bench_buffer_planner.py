@@ -5,15 +5,18 @@ Prints, with the shipped unconstrained checkpoint and one torch thread:
 - the time to build the graph for N observations with the full critic ensembles (3 distance
   + 3 cost critics; D and C for all N^2 pairs, then pruning at d_max = 7);
 - for K agents on that graph (learned proximity radius 1.5, no cost pruning, durative edges):
-  median and worst planning time over P problems (hard difficulty), the status counts and the
-  median sum of costs, per solver, without the planner's fallback:
+  median and worst planning time over P problems (hard difficulty), the status counts, the
+  median sum of costs and the makespans of the plans, per solver, without the planner's fallback:
 
   - ``auto``: the planner's default (ECBS w = 1.1 up to 20 agents, prioritised planning with
-    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget);
+    safe intervals above, the large-neighbourhood repair where ECBS runs out of its budget, the
+    priority inheritance stepper where prioritised planning gives up);
   - ``prioritized``: prioritised planning alone;
   - ``lns``: the large-neighbourhood repair alone (a prioritised plan whose stuck agents take
     their least conflicting paths, then small groups of agents re-planned until no conflict is
     left);
+  - ``pibt``: the priority inheritance stepper alone (all agents step together; an agent in the
+    way of a more urgent one is pushed off its node);
   - ``ecbs``: ECBS w = 1.1; ``cbs``: optimal CBS; ``cbs-unit``: optimal CBS with unit-time
     edges (the paper's time model: every edge one step).
 
@@ -50,6 +53,7 @@ SOLVER_OPTIONS = {
     "auto": dict(solver="auto"),
     "prioritized": dict(solver="prioritized"),
     "lns": dict(solver="lns"),
+    "pibt": dict(solver="pibt"),
     "ecbs": dict(solver="cbs", suboptimality=1.1),
     "cbs": dict(solver="cbs", suboptimality=1.0),
     "cbs-unit": dict(solver="cbs", suboptimality=1.0, time_model="unit"),
@@ -113,7 +117,7 @@ def main() -> None:
         for name in args.solvers:
             planner = setup.planner.with_options(time_limit=args.time_limit, fallback_suboptimality=None,
                                                  **SOLVER_OPTIONS[name])
-            times, cpu, solver_times, status = [], [], [], collections.Counter()
+            times, cpu, solver_times, status, spans = [], [], [], collections.Counter(), []
             socs[name] = []
             for p in problems:
                 c0 = time.process_time()
@@ -123,8 +127,11 @@ def main() -> None:
                 solver_times.append(plan.cbs.stats.runtime_s if plan.cbs is not None else np.nan)
                 status[plan.status] += 1
                 socs[name].append(plan.soc if plan.solved else np.nan)
+                if plan.solved:
+                    spans.append(plan.makespan)
             solved = np.array(socs[name], dtype=float)
-            soc = f"median SOC {np.nanmedian(solved):.0f}" if np.isfinite(solved).any() else "no plan"
+            soc = (f"median SOC {np.nanmedian(solved):.0f}, makespan median {np.median(spans):.0f} "
+                   f"(range {min(spans)}-{max(spans)})" if spans else "no plan")
             print(f"{name}, {k} agents, {args.difficulty}: median {np.median(times):.2f} s, "
                   f"worst {max(times):.2f} s (limit {args.time_limit:g} s; solver median "
                   f"{np.nanmedian(solver_times):.2f} s; CPU median {np.median(cpu):.2f} s, worst {max(cpu):.2f} s), "

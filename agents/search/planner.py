@@ -12,7 +12,8 @@ and the :class:`~agents.search.controller.WaypointController`:
    place is not cut off;
 4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
    for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
-   and repairs with large neighbourhoods where ECBS runs out of its budget, see
+   repairs with large neighbourhoods where ECBS runs out of its budget and steps all agents
+   together by priority inheritance where prioritised planning gives up, see
    :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
    takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
    they are at nodes whose predicted distance (either direction) is below
@@ -27,7 +28,8 @@ reports the largest value used), so the rest of the graph stays as safe as asked
 ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
 call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
 Every solver call is budgeted in expansions (``expansion_limit``,
-``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``), with a wall-clock limit
+``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``,
+``stepper_expansions_per_agent``), with a wall-clock limit
 (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
@@ -48,14 +50,16 @@ from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
+from .mapf.pibt import solve_pibt
 from .mapf.prioritized import solve_prioritized
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
-SOLVERS = ("auto", "cbs", "prioritized", "lns")
+SOLVERS = ("auto", "cbs", "prioritized", "lns", "pibt")
 #: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
-#: large-neighbourhood repair where CBS / ECBS runs out of its budget).
+#: large-neighbourhood repair where CBS / ECBS runs out of its budget, the priority inheritance
+#: stepper where prioritised planning does).
 AUTO_SEARCH_AGENTS = 20
 #: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
 #: buffer graph on an idle machine
@@ -66,6 +70,9 @@ DEFAULT_EXPANSION_LIMIT = 50_000
 DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_500
 #: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
 DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
+#: default ``stepper_expansions_per_agent``: the priority inheritance stepper's budget per agent
+#: (222 agents on the 1000-node buffer graph take 2,300 to 2,600 per agent)
+DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
 
 
 @dataclass
@@ -88,8 +95,8 @@ class MultiAgentPlan:
         predicted_cost: per agent, the predicted cost of its route (sum over its edges).
         problem: the problem graph the plan was made on (node observations, dense ``D`` and
             ``C``, the pruned graph), for execution, plots and inspection.
-        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"`` or
-            ``"single"``; ``""`` when none ran).
+        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"``, ``"pibt"``
+            or ``"single"``; ``""`` when none ran).
     """
 
     status: str
@@ -224,9 +231,13 @@ class BufferPlanner:
             repair, :func:`~agents.search.mapf.lns.solve_lns`: a prioritised plan in which an
             agent that finds no conflict-free path takes the least conflicting one, then small
             groups of agents re-planned until no conflict is left; solves crowds where
-            prioritised planning gives up) or ``"auto"`` (default): ``"cbs"`` for up to
-            ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its
-            budget (status ``"timeout"``), else ``"prioritized"`` (not followed by the repair:
+            prioritised planning gives up), ``"pibt"`` (the priority inheritance stepper,
+            :func:`~agents.search.mapf.pibt.solve_pibt`: all agents step together, an agent in
+            the way of a more urgent one is pushed off its node; solves the crowds of the most
+            agents the environment holds, with long makespans) or ``"auto"`` (default):
+            ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS
+            runs out of its budget (status ``"timeout"``), else ``"prioritized"``, then
+            ``"pibt"`` if prioritised planning gives up (status ``"timeout"``; not the repair:
             where prioritised planning gives up on the 1000-node buffer graph, the repair spent
             its whole budget, about a minute, and solved none).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
@@ -238,6 +249,8 @@ class BufferPlanner:
             search expansions over the initial plan and the repair, per agent (``None``: none).
         repair_seed: seeds the repair's choice of the agents re-planned together (an integer;
             the same seed, the same plan).
+        stepper_expansions_per_agent: the work budget of the priority inheritance stepper, in
+            candidate moves examined, per agent (``None``: none).
         time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
             Either ends the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
@@ -269,6 +282,7 @@ class BufferPlanner:
         prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
         repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
         repair_seed: int = 0,
+        stepper_expansions_per_agent: Optional[int] = DEFAULT_STEPPER_EXPANSIONS_PER_AGENT,
         time_limit: float = 30.0,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
@@ -301,7 +315,8 @@ class BufferPlanner:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         for name, lim in (("expansion_limit", expansion_limit),
                           ("prioritized_expansions_per_agent", prioritized_expansions_per_agent),
-                          ("repair_expansions_per_agent", repair_expansions_per_agent)):
+                          ("repair_expansions_per_agent", repair_expansions_per_agent),
+                          ("stepper_expansions_per_agent", stepper_expansions_per_agent)):
             if lim is not None and not (isinstance(lim, (int, np.integer)) and not isinstance(lim, bool)
                                         and lim >= 1):
                 raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
@@ -316,6 +331,8 @@ class BufferPlanner:
         self.repair_expansions_per_agent = (None if repair_expansions_per_agent is None
                                             else int(repair_expansions_per_agent))
         self.repair_seed = int(repair_seed)
+        self.stepper_expansions_per_agent = (None if stepper_expansions_per_agent is None
+                                             else int(stepper_expansions_per_agent))
         self.time_limit = float(time_limit)
         self.relax_cost = bool(relax_cost)
         if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
@@ -352,6 +369,7 @@ class BufferPlanner:
             solver=self.solver, expansion_limit=self.expansion_limit,
             prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
             repair_expansions_per_agent=self.repair_expansions_per_agent, repair_seed=self.repair_seed,
+            stepper_expansions_per_agent=self.stepper_expansions_per_agent,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
             max_edges=self.max_edges)
@@ -447,12 +465,18 @@ class BufferPlanner:
             solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
         if solver == "lns":
             return self._repair(inst), "lns"
+        if solver == "pibt":
+            return self._step(inst), "pibt"
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
             per_agent = self.prioritized_expansions_per_agent
             budget = None if per_agent is None else per_agent * k
             res = solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit)
+            if auto and res.status == "timeout":
+                stepped = self._step(inst)
+                stepped.message = f"{stepped.message} (after prioritized: {res.message})"
+                return stepped, "pibt"
         else:
             res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
                             expansion_limit=self.expansion_limit).solve()
@@ -471,6 +495,12 @@ class BufferPlanner:
         per_agent = self.repair_expansions_per_agent
         budget = None if per_agent is None else per_agent * inst.n_agents
         return solve_lns(inst, expansion_limit=budget, time_limit=self.time_limit, seed=self.repair_seed)
+
+    def _step(self, inst: MapfInstance) -> CBSResult:
+        """The priority inheritance stepper with this planner's budget."""
+        per_agent = self.stepper_expansions_per_agent
+        budget = None if per_agent is None else per_agent * inst.n_agents
+        return solve_pibt(inst, expansion_limit=budget, time_limit=self.time_limit)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

@@ -231,11 +231,12 @@ def test_planner_budget_is_counted_in_expansions():
     starts, goals = _crossing_problem(24)
     planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=0.9, expansion_limit=30,
                            prioritized_expansions_per_agent=1, repair_expansions_per_agent=2,
-                           fallback_suboptimality=None)
+                           stepper_expansions_per_agent=3, fallback_suboptimality=None)
     plan = planner.plan(starts, goals)
-    # prioritised planning runs out of 1 expansion per agent (no repair behind it)
-    assert plan.status == "timeout" and plan.solver == "prioritized", plan.message
-    assert "expansion limit of 24" in plan.message
+    # prioritised planning runs out of 1 expansion per agent, then the stepper of 3 per agent
+    # (no repair behind it)
+    assert plan.status == "timeout" and plan.solver == "pibt", plan.message
+    assert "expansion limit of 72" in plan.message and "after prioritized: expansion limit of 24" in plan.message
     # ECBS runs out of its 30 expansions, then the repair of 2 per agent
     plan = planner.plan(starts[:5], goals[:5])
     assert plan.status == "timeout" and plan.solver == "lns", plan.message
@@ -248,5 +249,7 @@ def test_planner_budget_is_counted_in_expansions():
         make_planner(pts, euclid_pairwise(), prioritized_expansions_per_agent=2.5)
     with pytest.raises(ValueError, match="repair_expansions_per_agent"):
         make_planner(pts, euclid_pairwise(), repair_expansions_per_agent=0)
+    with pytest.raises(ValueError, match="stepper_expansions_per_agent"):
+        make_planner(pts, euclid_pairwise(), stepper_expansions_per_agent=0)
     with pytest.raises(ValueError, match="repair_seed"):
         make_planner(pts, euclid_pairwise(), repair_seed=1.5)

@@ -54,7 +54,10 @@ Many agents
     large-neighbourhood repair (:mod:`agents.search.mapf.lns`), a prioritised plan in which an
     agent that finds no conflict-free path takes the one with the fewest conflicts, then small
     groups of agents re-planned until no conflict is left; it solves crowds where prioritised
-    planning gives up. Budgets of every solver can be counted in expansions
+    planning gives up. :func:`solve_pibt`: a joint stepper by priority inheritance with
+    backtracking (:mod:`agents.search.mapf.pibt`): all agents advance together, and an agent in
+    the way of a more urgent one is pushed off its node; it untangles crowds that one-at-a-time
+    planning cannot, with long makespans. Budgets of every solver can be counted in expansions
     (``expansion_limit``), so a result does not depend on the machine's load.
 
 Feasibility
@@ -67,7 +70,7 @@ Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
     :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
     :func:`validate` to check any solution independently, :func:`solve_prioritized`,
-    :func:`solve_lns`,
+    :func:`solve_lns`, :func:`solve_pibt`,
     :func:`joint_feasible`, the constraint and conflict types,
     and the MovingAI benchmark loaders :func:`load_map`, :func:`load_scen`,
     :func:`load_instance`, :func:`grid_graph`.
@@ -83,6 +86,7 @@ Modules, one concept each
     ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``,
     ``movingai`` (benchmark files), ``sipp`` (safe intervals and the single-agent search over
     them), ``prioritized`` (prioritised planning), ``lns`` (the large-neighbourhood repair),
+    ``pibt`` (the priority inheritance stepper),
     ``conflict_table`` (planning with conflicts allowed, its low level) and ``feasibility`` (the
     exhaustive check).
 """
@@ -105,6 +109,7 @@ from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
 from .lns import solve_lns
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
+from .pibt import solve_pibt
 from .prioritized import solve_prioritized
 from .result import STATUSES, CBSResult, CBSStats
 from .solver import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_MERGE_THRESHOLD, HEURISTICS, CBSSolver, solve_cbs
@@ -117,5 +122,5 @@ __all__ = [
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
     "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
-    "load_map", "load_scen", "solve_cbs", "solve_lns", "solve_prioritized", "validate",
+    "load_map", "load_scen", "solve_cbs", "solve_lns", "solve_pibt", "solve_prioritized", "validate",
 ]
