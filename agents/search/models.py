@@ -122,7 +122,7 @@ def default_reach_threshold(model: Any) -> float:
 #: steps in escapes and fallback legs. Apartment3, seed 1, 10 agents, 50 medium and 50 hard
 #: problems: success 98% / 90% -> 100% / 92%, mean largest cost 85 / 168 -> 69 / 131.
 PANORAMA_CONTROLLER_OPTIONS: Dict[str, Any] = {"self_margin": 0.5, "settle_patience": 6, "progress_patience": 20,
-                                               "skip_after": 1, "escape": "sidestep"}
+                                               "skip_after": 1}
 
 
 def default_hold(model: Any) -> str:
