@@ -33,10 +33,10 @@ current waypoint's observation. Rules, all from observations only:
   took one place for another and hovers there), takes ``escape_steps`` escape actions (more if
   it gets stuck again): random ones, or (``escape="sidestep"``) a step sideways to the way its
   policy pushes, to one side and at the next escape to the other (an agent that pushes into an
-  agent parked on its way slides past it instead of pushing on); stuck ``skip_after`` times on the way to the same target, it asks ``replan`` for a new plan from
-  where it stands (without one, it gives a waypoint up and heads for the next one). A
-  deterministic policy that pushes into a wall would otherwise push there until the episode
-  ends;
+  agent parked on its way slides past it instead of pushing on); stuck ``skip_after`` times on
+  the way to the same target, it asks ``replan`` for a new plan from where it stands (without
+  one, it gives a waypoint up and heads for the next one). A deterministic policy that pushes
+  into a wall would otherwise push there until the episode ends;
 - **fallback** (optional): an agent stuck ``skip_after`` times on the way to one target
   hands that leg over to ``fallback_policy`` until it reaches its next waypoint (e.g. a
   constrained policy that will not approach a goal beside furniture hands over to the

@@ -373,8 +373,9 @@ def test_sidesteps_alternate_sides():
     other way at its second (one side may be blocked), at full speed."""
     wp = np.array([[20.0, 0.2]], np.float32) / SIZE  # in the wall: never reached
     env = make_env([(20.0, 5.0)], [(40.0, 40.0)])
-    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, np.array([40, 40], np.float32) / SIZE)},
-                              reach_threshold=0.1, safety_radius=None, escape="sidestep", skip_after=100)
+    plan = AgentPlan(wp, np.array([40, 40], np.float32) / SIZE)
+    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": plan}, reach_threshold=0.1, safety_radius=None,
+                              escape="sidestep", skip_after=100)
     trail = run(env, ctrl, limit=40)["agent_0"]
     moved = np.diff(trail, axis=0)
     along = moved[np.abs(moved[:, 0]) > 0.9, 0]  # the escape steps, along the wall
