@@ -58,6 +58,8 @@ class TrainConfig:
     """self-sampling: bonus per unit of ensemble disagreement"""
     narrow_fraction: float = 0.0
     """self-sampling: share of each refill's problems that cross a narrow passage, not scored by the critic"""
+    parked_agents: int = 0
+    """other agents standing still on the way of each training episode (the env's ``parked_agents``)"""
     oracle_band: Tuple[float, float] = (2.0, 15.0)
     """oracle sampler: band of ground-truth geodesic goal distances (world units)"""
     cost_limit: float = 10.0
@@ -154,6 +156,8 @@ class TrainConfig:
             raise ValueError(f"threads must be >= 1, got {self.threads}")
         if not 0.0 <= self.narrow_fraction <= 1.0:
             raise ValueError(f"narrow_fraction must be in [0, 1], got {self.narrow_fraction!r}")
+        if not isinstance(self.parked_agents, int) or self.parked_agents < 0:
+            raise ValueError(f"parked_agents must be an integer >= 0, got {self.parked_agents!r}")
         if self.narrow_fraction > 0 and self.sampler != "self":
             raise ValueError("narrow_fraction shapes the self-sampler's candidates: use it with sampler 'self'")
         if self.eval_freq < 1:
@@ -224,6 +228,16 @@ def _extractor_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
     return kwargs
 
 
+def make_training_env(cfg: TrainConfig):
+    """The env a stage trains in: ``cfg.env_id``, with ``cfg.parked_agents`` parked agents on the way."""
+    import gymnasium as gym
+
+    import safe_mapf_envs  # noqa: F401
+
+    kwargs: Dict[str, Any] = {"parked_agents": cfg.parked_agents} if cfg.parked_agents else {}
+    return gym.make(cfg.env_id, **kwargs)
+
+
 def build_model(cfg: TrainConfig):
     """The model of a stage: new (unconstrained) or loaded from ``cfg.init`` and set up for fine-tuning."""
     import gymnasium as gym
@@ -234,7 +248,7 @@ def build_model(cfg: TrainConfig):
     from .algorithm import SafeGoalTD3
     from .encoders import is_image_space
 
-    env = gym.make(cfg.env_id)
+    env = make_training_env(cfg)
     obs_space = cast(gym.spaces.Dict, env.observation_space)
     image = is_image_space(obs_space["observation"])
     shape = cast(Tuple[int, ...], env.action_space.shape)
@@ -314,15 +328,11 @@ class ResumeCheckpoint:
 
     def load(self, cfg: "TrainConfig"):
         """The saved model (with its replay buffer) set up for ``cfg``, and the saved state."""
-        import gymnasium as gym
-
-        import safe_mapf_envs  # noqa: F401
-
         from .algorithm import SafeGoalTD3
 
         with open(os.path.join(self.dir, "state.json")) as f:
             state = json.load(f)
-        model = SafeGoalTD3.load(os.path.join(self.dir, "model.zip"), env=gym.make(cfg.env_id), device="cpu")
+        model = SafeGoalTD3.load(os.path.join(self.dir, "model.zip"), env=make_training_env(cfg), device="cpu")
         replay = os.path.join(self.dir, "replay.npz")
         if state.get("replay") and os.path.exists(replay):
             model.replay_buffer.load_arrays(replay)

@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .base import RENDER_MODES, NavigationEnvBase
-from .checks import check_action, check_goal_distance, parse_reset_options
+from .checks import check_action, check_count, check_goal_distance, parse_reset_options
 from .formats import flat_space, flatten_observation
 from .world import World
 
@@ -134,7 +134,14 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     - ``observation_format`` ("dict" or "flat", see Observation Space);
     - ``obs_type`` ("vector" or "panorama"), ``action_scale`` (1.0; world units per unit of
       action), ``sensor_kwargs`` (None: :class:`~safe_mapf_envs.sensors.PanoramaSensor`
-      arguments for panoramas).
+      arguments for panoramas);
+    - ``parked_agents`` (0): this many other agents stand still in the episode, immovable
+      obstacles as agents parked at their goals are in the multi-agent env, each drawn near the
+      straight line from the start to the goal (a third of the way to two thirds, up to two
+      agent radii to either side), where they leave the start and the goal free and do not
+      overlap (a place that does not fit is skipped). Panoramas show them as the
+      multi-agent env shows other agents; the goal's panorama does not, as there. For training
+      agents that meet parked agents on their way; ``info["parked"]`` holds their positions.
 
     The apartment ids (``SafeApartment0-v0`` .. ``SafeApartment3-v0``) are in metres with
     ``agent_radius=0.2``, ``action_scale=0.25``, ``goal_threshold=0.5``, cost radius 1 and
@@ -176,7 +183,9 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         action_scale: float = 1.0,
         sensor_kwargs: Optional[Dict[str, Any]] = None,
         observation_format: str = "dict",
+        parked_agents: int = 0,
     ) -> None:
+        self.parked_agents = check_count(parked_agents, "parked_agents", 0)
         self._setup(
             layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
             cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
@@ -203,6 +212,8 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         self._goal = np.zeros(2)
         self._trail: List[np.ndarray] = []
         self._waypoints: Optional[np.ndarray] = None
+        #: positions of the parked agents of the episode (``parked_agents``), ``(M, 2)``
+        self._parked = np.zeros((0, 2))
         self._open_window()
 
     # ----------------------------------------------------------------- properties
@@ -223,7 +234,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
 
     def _obs(self) -> Union[Dict[str, np.ndarray], np.ndarray]:
         if self.sensor is not None:
-            img = self.sensor.render(self._pos)
+            if len(self._parked):
+                img = self.sensor.render(self._pos, agents=self._parked, agent_radius=self.scenario.agent_radius)
+            else:
+                img = self.sensor.render(self._pos)
             obs = {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
         else:
             p = self.normalize(self._pos)
@@ -238,6 +252,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             "goal": self._goal.copy(),
             "distance_to_goal": dist,
             "is_success": dist <= self.goal_threshold,
+            **({"parked": self._parked.copy()} if self.parked_agents else {}),
         }
 
     def draw_problem(self, rng: np.random.Generator, options: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
@@ -260,6 +275,30 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             goal = sc.sample_states(1, rng)[0]
         return start, goal
 
+    def draw_parked(self, rng: np.random.Generator, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Up to ``parked_agents`` positions of parked agents on the way from ``start`` to ``goal``, ``(M, 2)``.
+
+        Each is drawn a third to two thirds of the way along the straight line, up to two agent
+        radii to either side; a draw that is not free, or where an agent would overlap the one at
+        the start, at the goal or another parked agent, is skipped.
+        """
+        sc = self.scenario
+        r = sc.agent_radius
+        out: List[np.ndarray] = []
+        if self.parked_agents == 0:
+            return np.zeros((0, 2))
+        d = goal - start
+        length = float(np.hypot(d[0], d[1]))
+        normal = np.array([-d[1], d[0]]) / length if length > 0 else np.array([1.0, 0.0])
+        for _ in range(self.parked_agents):
+            p = start + rng.uniform(1 / 3, 2 / 3) * d + rng.uniform(-2 * r, 2 * r) * normal
+            clear = (sc.is_free(p) and np.hypot(*(p - start)) > 2 * r + 0.05
+                     and np.hypot(*(p - goal)) > 2 * r + 0.05
+                     and all(np.hypot(*(p - q)) > 2 * r + 0.05 for q in out))
+            if clear:
+                out.append(p)
+        return np.array(out).reshape(-1, 2)
+
     # ----------------------------------------------------------------- gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):
         """Start an episode; see Starting State in the class docstring for ``options``."""
@@ -270,7 +309,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         self._goal = goal
         if self.sensor is not None:
             self._goal_image = self.sensor.render(goal)
-        self._world = World(sc.size, sc.boxes, start[None], sc.agent_radius, self.substeps)
+        self._parked = self.draw_parked(self.np_random, start, goal)
+        self._world = World(sc.size, sc.boxes, np.vstack([start[None], self._parked]), sc.agent_radius, self.substeps)
+        for i in range(1, 1 + len(self._parked)):
+            self._world.park(i)
         self._pos = start.copy()
         self._trail = [start.copy()]
         cost = float(sc.field.cost(start))
@@ -287,7 +329,9 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         a = np.clip(a, -1.0, 1.0)
         if self.action_noise > 0:
             a = a + self.np_random.normal(0.0, self.action_noise, size=2)
-        trace, _ = self._world.step(a[None] * self.action_scale)
+        moves = np.zeros((1 + len(self._parked), 2))
+        moves[0] = a * self.action_scale
+        trace, _ = self._world.step(moves)
         pts = trace[:, 0]
         cost = float(self.scenario.field.cost(pts).max())
         self._pos = pts[-1].copy()

@@ -54,6 +54,9 @@ class SafeNavigationVectorEnv(VectorEnv):
                              "render a single env, or use vectorization_mode='sync'")
         #: the single-agent env whose settings, spaces and goal methods every sub-env shares
         self.env = SafeNavigationEnv(**kwargs)
+        if self.env.parked_agents:
+            raise ValueError("the native vector env has no parked agents (parked_agents must be 0); use "
+                             "gymnasium.make_vec(..., vectorization_mode='sync')")
         if self.env.sensor is not None:
             raise ValueError("the native vector env builds vector observations; for panoramas use "
                              "gymnasium.make_vec(..., vectorization_mode='sync')")

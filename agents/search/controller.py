@@ -30,11 +30,13 @@ current waypoint's observation. Rules, all from observations only:
 - **unstick**: an agent that was free to move but whose observation has hardly changed over
   ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
   other), or (optional) that came no closer to its target for ``progress_patience`` steps (it
-  took one place for another and hovers there), takes ``escape_steps`` random actions (more if
-  it gets stuck again); stuck ``skip_after`` times on the way to the same target, it asks ``replan`` for a new plan from
-  where it stands (without one, it gives a waypoint up and heads for the next one). A
-  deterministic policy that pushes into a wall would otherwise push there until the episode
-  ends;
+  took one place for another and hovers there), takes ``escape_steps`` escape actions (more if
+  it gets stuck again): random ones, or (``escape="sidestep"``) a step sideways to the way its
+  policy pushes, to one side and at the next escape to the other (an agent that pushes into an
+  agent parked on its way slides past it instead of pushing on); stuck ``skip_after`` times on
+  the way to the same target, it asks ``replan`` for a new plan from where it stands (without
+  one, it gives a waypoint up and heads for the next one). A deterministic policy that pushes
+  into a wall would otherwise push there until the episode ends;
 - **fallback** (optional): an agent stuck ``skip_after`` times on the way to one target
   hands that leg over to ``fallback_policy`` until it reaches its next waypoint (e.g. a
   constrained policy that will not approach a goal beside furniture hands over to the
@@ -140,8 +142,13 @@ class WaypointController:
             is stuck. On the apartments one step (0.25 m) changes a panorama by about 0.05 and
             the jitter of an agent pressed against a wall by under 0.01; on the 2D maps
             (positions divided by the world size) 0.01 is half a unit a step on a 55-unit map.
-        escape_steps: random actions an agent takes once it is found stuck (doubled for every
+        escape_steps: escape actions an agent takes once it is found stuck (doubled for every
             further time it is stuck on the way to the same target, up to 8 times as many).
+        escape: ``"random"``: uniform random actions; ``"sidestep"``: the policy's action turned
+            by a right angle at full speed, turned left and right in turn from one escape to the
+            next (a policy that pushes into an obstacle it does not see as one, such as another
+            agent parked on its way, moves out of line with it; a random walk of a few steps
+            hardly moves it); a random direction where the policy's action is about zero.
         skip_after: times an agent may be stuck on the way to one target before it replans
             (or, without ``replan``, heads for the next waypoint).
         seed: seed of the escape actions.
@@ -175,6 +182,7 @@ class WaypointController:
         stuck_window: Optional[int] = 4,
         stuck_tolerance: float = 0.01,
         escape_steps: int = 3,
+        escape: str = "random",
         skip_after: int = 2,
         seed: Optional[int] = 0,
         order_patience: int = 40,
@@ -203,6 +211,12 @@ class WaypointController:
         self.stuck_window = stuck_window
         self.stuck_tolerance = float(stuck_tolerance)
         self.escape_steps = int(escape_steps)
+        if escape not in ("random", "sidestep"):
+            raise ValueError(f"escape must be 'random' or 'sidestep', got {escape!r}")
+        self.escape = escape
+        #: per agent: the action of its escape under way (sidestep), and the side of its last one
+        self._escape_action: Dict[str, np.ndarray] = {}
+        self._side = {a: 1.0 for a in self.plans}
         self.skip_after = int(skip_after)
         self.rng = np.random.default_rng(seed)
         self._recent: Dict[str, Deque[np.ndarray]] = {a: deque(maxlen=(stuck_window or 0) + 1) for a in self.plans}
@@ -451,7 +465,7 @@ class WaypointController:
                 continue
             if self._escape[a] > 0:
                 self._escape[a] -= 1
-                actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
+                actions[i] = self._escape_step(a, actions[i])
                 recent.clear()
                 continue
             recent.append(obs[i].astype(np.float32) / scale)
@@ -479,7 +493,27 @@ class WaypointController:
                     self._stuck_count[a] = 0
                     self.stats.leg_escapes[a] = 0
                     self.stats.skips += 1
-            actions[i] = self.rng.uniform(-1.0, 1.0, size=actions.shape[1])
+            self._escape_action.pop(a, None)
+            if self.escape == "sidestep":
+                self._side[a] = -self._side[a]
+            actions[i] = self._escape_step(a, actions[i])
+
+    def _escape_step(self, agent: str, action: np.ndarray) -> np.ndarray:
+        """The escape action of ``agent`` now, given the action its policy would take (see ``escape``)."""
+        if self.escape == "random":
+            return self.rng.uniform(-1.0, 1.0, size=action.shape)
+        step = self._escape_action.get(agent)
+        if step is None:
+            a = np.asarray(action, dtype=np.float64).reshape(-1)
+            norm = float(np.hypot(a[0], a[1])) if a.size == 2 else 0.0
+            if norm < 1e-3:  # no push to turn: a random direction
+                a = self.rng.normal(size=2)
+                norm = float(np.hypot(a[0], a[1])) or 1.0
+            side = self._side[agent]
+            step = np.array([-a[1] * side, a[0] * side]) / norm
+            step = step / max(1.0, float(np.abs(step).max()))  # full speed, inside the action box
+            self._escape_action[agent] = step
+        return step.astype(np.asarray(action).dtype, copy=True)
 
     def _yield_mask(self, live: List[str], obs: np.ndarray, moving: np.ndarray) -> Dict[int, int]:
         """The agents (indices into ``live``) that yield on this step, each to the agent it yields to;

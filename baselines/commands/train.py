@@ -47,6 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--narrow-fraction", type=float, default=d.narrow_fraction,
                    help="self-sampling: share of each refill's problems that cross a narrow passage (doorway, "
                         "corridor; start and goal on either side), kept without scoring by the critic")
+    g.add_argument("--parked-agents", type=int, default=d.parked_agents, metavar="M",
+                   help="other agents standing still near the straight line of each training episode, seen in "
+                        "the panoramas and in the way (default 0)")
     g.add_argument("--oracle-band", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.oracle_band),
                    help="oracle sampler: geodesic goal distance band (world units)")
     g = p.add_argument_group("constrained stage")

@@ -161,3 +161,21 @@ def test_augmentation_can_be_switched_on_when_continuing_a_checkpoint():
     assert on.augmentation == "shift" and on.augment is not None
     kept = build_model(TrainConfig(env_id="SafeApartment0-v0", init=ckpt, buffer_size=200))
     assert kept.augmentation is None  # None keeps the checkpoint's setting
+
+
+def test_parked_agents_reach_the_training_env():
+    import argparse
+
+    from agents.training import TrainConfig, build_model
+    from baselines.commands import train as train_cmd
+
+    parser = argparse.ArgumentParser()
+    train_cmd.register(parser.add_subparsers())
+    cfg = train_cmd.config_from_args(parser.parse_args(["train", "--env", "SafeApartment0-v0", "--parked-agents", "2",
+                                                         "--buffer-size", "200"]))
+    assert cfg.parked_agents == 2
+    cfg.validate()
+    env = build_model(cfg).get_env().envs[0].unwrapped
+    assert env.parked_agents == 2
+    with pytest.raises(ValueError, match="parked_agents"):
+        TrainConfig(parked_agents=-1).validate()

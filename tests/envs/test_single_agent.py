@@ -273,3 +273,45 @@ def test_human_mode_without_display_names_the_problem_and_check_env_runs_headles
     env.close()
     with pytest.warns(UserWarning, match="needs a display"):  # it makes the env in every render mode
         gym_check_env(gym.make("SafeCentralObstacle-v0").unwrapped)
+
+
+def test_parked_agents_stand_on_the_way_immovable_and_in_view():
+    """``parked_agents``: the same start and goal as without them, agents drawn on the way that the
+    agent cannot push (it stops at contact), shown in its panorama but not in the goal's."""
+    with_parked = gym.make("SafeApartment3-v0", parked_agents=2)
+    plain = gym.make("SafeApartment3-v0")
+    counts = []
+    for seed in range(12):
+        obs, info = with_parked.reset(seed=seed)
+        obs0, info0 = plain.reset(seed=seed)
+        np.testing.assert_array_equal(info["position"], info0["position"])
+        np.testing.assert_array_equal(obs["desired_goal"], obs0["desired_goal"])
+        parked = info["parked"]
+        counts.append(len(parked))
+        r = with_parked.unwrapped.scenario.agent_radius
+        start, goal = info["position"], info["goal"]
+        for p in parked:
+            assert np.linalg.norm(p - start) > 2 * r and np.linalg.norm(p - goal) > 2 * r
+            t = np.dot(p - start, goal - start) / np.dot(goal - start, goal - start)
+            assert 1 / 3 <= t <= 2 / 3
+        if len(parked):
+            assert (obs["observation"] != obs0["observation"]).any()
+            # drive straight at the first parked agent: the agent stops at contact, the parked one stays
+            for _ in range(30):
+                d = parked[0] - info["position"]
+                obs, _, term, trunc, info = with_parked.step((d / np.linalg.norm(d)).astype(np.float32))
+                if term or trunc:
+                    break
+            np.testing.assert_array_equal(info["parked"], parked)
+            assert np.linalg.norm(info["position"] - parked[0]) >= 2 * r - 0.02
+        else:
+            np.testing.assert_array_equal(obs["observation"], obs0["observation"])
+    assert sum(counts) >= 8 and max(counts) == 2
+    assert "parked" not in plain.reset(seed=0)[1]
+
+
+def test_parked_agents_is_checked():
+    with pytest.raises(ValueError, match="parked_agents"):
+        gym.make("SafeApartment0-v0", parked_agents=-1)
+    with pytest.raises(ValueError, match="parked agents"):
+        gym.make_vec("SafeCentralObstacle-v0", num_envs=2, vectorization_mode="vector_entry_point", parked_agents=1)

@@ -328,3 +328,56 @@ def test_with_skip_after_one_a_stuck_leg_goes_to_the_fallback_at_once_and_then_t
     t2, fallbacks2, escapes2 = counts(2)
     assert fallbacks1 == fallbacks2 == 1  # the fallback had its turn first either way
     assert (escapes1, escapes2) == (2, 4) and t1 < t2  # the new plan comes after half the escapes, sooner
+
+
+def push_past_a_parked_agent(escape, seed):
+    """agent_0 drives straight at its goal through agent_1, parked at its own goal on the way;
+    returns (steps to arrive or None, escapes, agent_0's trail)."""
+    env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=2)
+    obs, infos = env.reset(options={"starts": [(5.0, 5.0), (15.0, 5.0)], "goals": [(30.0, 5.0), (15.0, 5.0)]})
+    goal = np.array([30, 5], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps, {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), goal)},
+                              reach_threshold=1.0, safety_radius=None, escape=escape, seed=seed, skip_after=100)
+    trail = [infos["agent_0"]["position"]]
+    while "agent_0" in env.agents and ctrl.t < 200:
+        actions = ctrl.act({"agent_0": obs["agent_0"]["observation"]})
+        if ctrl.t == 1:  # agent_1 stands on its goal: it arrives at the first step and parks there
+            actions["agent_1"] = np.zeros(2, np.float32)
+        obs, _, _, _, infos = env.step(actions)
+        assert "agent_1" not in env.agents  # parked: an immovable obstacle from now on
+        trail.append(infos["agent_0"]["position"])
+    return (None if "agent_0" in env.agents else ctrl.t), ctrl.stats.escapes, np.array(trail)
+
+
+def test_a_sidestep_takes_an_agent_past_a_parked_agent_on_its_line():
+    """A policy that does not see another agent as an obstacle pushes into it; stepping sideways to
+    its push gets it past in one escape, whatever the seed, where random escapes need up to four."""
+    random_escapes = []
+    for seed in range(5):
+        steps, escapes, trail = push_past_a_parked_agent("sidestep", seed)
+        assert steps is not None and steps <= 32 and escapes == 1
+        moved = np.diff(trail, axis=0)
+        across = (np.abs(moved[:, 1]) > 0.9) & (np.abs(moved[:, 0]) < 0.1)  # full steps across the line
+        assert across.sum() == 3 and len(set(np.sign(moved[across, 1]))) == 1  # the 3 escape steps, one way
+        random_escapes.append(push_past_a_parked_agent("random", seed)[1])
+    assert max(random_escapes) >= 2
+
+
+def test_the_escape_kind_is_checked():
+    with pytest.raises(ValueError, match="escape must be"):
+        WaypointController(straight_policy, euclid_steps, {}, escape="spin")
+
+
+def test_sidesteps_alternate_sides():
+    """Pushed into the wall below, the agent steps along it: one way at its first escape, the
+    other way at its second (one side may be blocked), at full speed."""
+    wp = np.array([[20.0, 0.2]], np.float32) / SIZE  # in the wall: never reached
+    env = make_env([(20.0, 5.0)], [(40.0, 40.0)])
+    plan = AgentPlan(wp, np.array([40, 40], np.float32) / SIZE)
+    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": plan}, reach_threshold=0.1, safety_radius=None,
+                              escape="sidestep", skip_after=100)
+    trail = run(env, ctrl, limit=40)["agent_0"]
+    moved = np.diff(trail, axis=0)
+    along = moved[np.abs(moved[:, 0]) > 0.9, 0]  # the escape steps, along the wall
+    assert ctrl.stats.escapes >= 2 and len(along) >= 3 + 6
+    assert np.all(along[:3] == along[0]) and np.all(along[3:9] == -along[0])  # 3 one way, then 6 the other
