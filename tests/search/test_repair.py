@@ -201,3 +201,39 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
             break
         policy.predict({"agent_0": both["agent_0"]})
     assert policy.stats.replans == 1 and not set(policy.routes["agent_0"]) & set(near)
+
+
+def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
+    """agent_1's goal lies 1.5 from the only door; agent_0's every way to its goal goes through the door.
+    With ``park_clearance`` agent_1 parks only after agent_0 has arrived; without it (``None``), nothing
+    holds it (agent_0's route passes the goal at no point the planner calls near)."""
+    goal_1 = np.array([6.5, 5.0], np.float32)
+    both = {"agent_0": {"observation": START, "desired_goal": GOAL},
+            "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
+    plain = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=None)
+    plain.predict(both)
+    assert plain._goal_blockers("agent_1") == []
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=2.0)
+    policy.predict(both)
+    assert DOOR in policy.routes["agent_0"]
+    assert policy._goal_blockers("agent_1") == [("agent_0", len(policy.routes["agent_0"]))]
+    assert policy._goal_blockers("agent_0") == []  # agent_1 has a way around agent_0's goal
+    with pytest.raises(ValueError, match="park_clearance"):
+        SearchPolicy(planner, world, park_clearance=0.0)
+
+
+def test_cut_off_tells_a_cut_way_from_no_way():
+    from scipy import sparse
+
+    from agents.search.policy import _cut_off
+
+    # a path 0 - 1 - 2 - 3 and a detour 0 - 4 - 3 around node 1 and 2
+    edges = [(0, 1), (1, 2), (2, 3), (0, 4), (4, 3)]
+    rows, cols = zip(*edges)
+    adj = sparse.csr_matrix((np.ones(len(edges)), (rows, cols)), shape=(6, 6))
+    ban = np.array([False, True, True, False, False, False])
+    assert not _cut_off(adj, 0, 3, ban)  # the detour
+    ban[4] = True
+    assert _cut_off(adj, 0, 3, ban)  # every way passes the banned nodes
+    assert not _cut_off(adj, 0, 5, ban)  # no way at all: not cut off by the ban
+    assert not _cut_off(adj, 0, 3, np.array([True, False, False, True]))  # source and target stay in
