@@ -205,12 +205,12 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
 
 def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
     """agent_1's goal lies 1.5 from the only door; agent_0's every way to its goal goes through the door.
-    With ``park_clearance`` agent_1 parks only after agent_0 has arrived; without it (``None``), nothing
+    With ``park_clearance`` agent_1 parks only after agent_0 has arrived; without it (the default), nothing
     holds it (agent_0's route passes the goal at no point the planner calls near)."""
     goal_1 = np.array([6.5, 5.0], np.float32)
     both = {"agent_0": {"observation": START, "desired_goal": GOAL},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
-    plain = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=None)
+    plain = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order")
     plain.predict(both)
     assert plain._goal_blockers("agent_1") == []
     policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=2.0)
