@@ -16,7 +16,7 @@ on it.
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List, Mapping, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -123,4 +123,71 @@ def goal_passers(problem: Any, goal: int, others: Mapping[str, Tuple[Sequence[in
     return out
 
 
-__all__ = ["Dependencies", "goal_passers", "plan_dependencies", "proximity_relation"]
+def shut_out(problem: Any, goal: int, others: Mapping[str, Tuple[Sequence[int], Any, int, int]], clearance: float,
+             cache: Optional[Dict[Tuple[int, ...], bool]] = None) -> List[Tuple[str, int]]:
+    """The agents that an agent parked at ``goal`` would shut out, each with its goal's target index.
+
+    An agent is shut out when its goal is reachable on its own problem graph from the node it left
+    last, but not without the buffer nodes within ``clearance`` predicted steps of ``goal`` (a
+    goal beside a door or at the end of a corridor: agents park where they first come within the
+    goal radius, so the parked agent can stand in the passage).
+
+    Args:
+        problem: the problem graph of the parking agent; goal: its goal's id there.
+        others: per agent still under way, as for :func:`goal_passers`.
+        clearance: predicted steps around ``goal``.
+        cache: optional dict that keeps the answers (keyed by the graphs' ids and the nodes).
+    """
+    near = nodes_near(problem, goal, clearance)
+    cache = {} if cache is None else cache
+    out: List[Tuple[str, int]] = []
+    for b, (route, pb, gb, k) in others.items():
+        source = route[k - 1] if 1 <= k <= len(route) else (route[0] if len(route) else None)
+        if source is None:
+            continue
+        key = (id(problem), goal, id(pb), int(source), gb, int(clearance * 1000))
+        if key not in cache:
+            cache[key] = cut_off(pb.graph.distance, int(source), gb, near)
+        if cache[key]:
+            out.append((b, len(route)))
+    return out
+
+
+def nodes_near(problem: Any, node: int, radius: float) -> np.ndarray:
+    """Mask of the buffer nodes of ``problem`` within ``radius`` predicted steps of ``node``, either way."""
+    n = problem.n_buffer
+    return np.minimum(problem.D[node, :n], problem.D[:n, node]) < radius
+
+
+def cut_off(adjacency: Any, source: int, target: int, banned: np.ndarray) -> bool:
+    """Whether ``target`` is reachable from ``source`` in the CSR ``adjacency`` but not without the
+    nodes where ``banned`` (a mask over its first nodes) is true (``source`` and ``target`` stay in)."""
+
+    def reaches(skip: np.ndarray) -> bool:
+        seen = skip.copy()
+        seen[source] = True
+        frontier = [source]
+        indptr, indices = adjacency.indptr, adjacency.indices
+        while frontier:
+            nxt = []
+            for u in frontier:
+                for v in indices[indptr[u]:indptr[u + 1]]:
+                    if v == target:
+                        return True
+                    if not seen[v]:
+                        seen[v] = True
+                        nxt.append(v)
+            frontier = nxt
+        return source == target
+
+    free = np.zeros(adjacency.shape[0], dtype=bool)
+    if not reaches(free):
+        return False
+    skip = free.copy()
+    skip[:len(banned)] = banned
+    skip[source] = skip[target] = False
+    return not reaches(skip)
+
+
+__all__ = ["Dependencies", "cut_off", "goal_passers", "nodes_near", "plan_dependencies", "proximity_relation",
+           "shut_out"]

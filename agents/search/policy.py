@@ -35,7 +35,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
-from .dependencies import goal_passers, plan_dependencies, proximity_relation
+from .dependencies import goal_passers, nodes_near, plan_dependencies, proximity_relation, shut_out
 from .graph import NodePairwise, ProblemGraph
 from .models import (
     buffer_observations,
@@ -113,16 +113,8 @@ class SearchPolicy:
             have arrived (parked there) while a route around them exists.
             The edge it failed on is recorded in ``memory``.
         ban_radius: see ``replan_when_stuck``.
-        park_clearance: with ``hold="order"``, an agent also waits to park until the agents whose
-            every way to their goals, on the graph, passes within this many predicted steps of
-            its goal have arrived: parked there, it would shut them out (a goal beside a door or
-            at the end of a corridor; agents park where they first come within the goal radius,
-            up to 0.5 m short of the goal on the apartments). ``None`` (default): only the agents
-            whose current routes pass the goal. With 4 (about an agent's width plus the goal
-            radius on the apartments), on Apartment3's validation problems (10 agents, 50 medium
-            and 50 hard problems at seeds 1, 3 and 5) 295 of 300 runs arrived against 289, and 1
-            agent was blocked by a parked one against 7; on Table II's test problems as many runs
-            arrived as without it (1164 of 1200) at a 7% higher mean largest cost, so it is off.
+        park_clearance: with ``hold="order"``, agents also park after those their goal would shut
+            out (:func:`~agents.search.dependencies.shut_out`, this many predicted steps); ``None``: off.
         seed: seed of the controller's escape actions (each episode starts from it).
         deterministic: drive with the deterministic policy (default).
         fallback_model: optional second checkpoint that drives an agent's leg once the policy
@@ -324,8 +316,7 @@ class SearchPolicy:
         self._goals: Dict[str, np.ndarray] = {}
         self._last_obs: Dict[str, np.ndarray] = {}
         self._last_names: set = set()
-        #: (parking agent, other, their problem graphs, the other's node and goal) -> whether the other is cut off
-        self._cut_cache: Dict[Tuple[str, str, int, int, int, int], bool] = {}
+        self._cut_cache: Dict[Tuple[int, ...], bool] = {}
         #: seconds spent on the episode's first plan, and on the replans since
         self.planning_time = 0.0
         self.replan_time = 0.0
@@ -520,13 +511,8 @@ class SearchPolicy:
         assert self.controller is not None
         n = len(self.planner.observations) if self.planner is not None else 0
         for a, seen in self._seen_index.items():
-            now = self.controller.index.get(a, seen)
-            route = self.routes.get(a, [])
-            for q in range(max(seen, 1), min(now, len(route))):  # targets seen .. now - 1 were reached
-                u, v = route[q - 1], route[q]
-                if u < n and v < n and u != v:
-                    self.memory.record_success(u, v)
-            self._seen_index[a] = now
+            self.memory.record_route(self.routes.get(a, []), seen, self.controller.index.get(a, seen), n)
+            self._seen_index[a] = self.controller.index.get(a, seen)
 
     def _exclude_edges(self, agent: str) -> np.ndarray:
         """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
@@ -544,46 +530,16 @@ class SearchPolicy:
         problem, goal, _ = self._route_graph[agent]
         out = goal_passers(problem, goal, others, float(self.planner.proximity_radius or 0.0))
         if self.park_clearance is not None:
-            passing = {b for b, _ in out}
-            out += [(b, len(self.routes.get(b, []))) for b in self._shut_out(agent) if b not in passing]
-        return out
-
-    def _shut_out(self, agent: str) -> List[str]:
-        """The agents still under way whose goals are reachable on their problem graphs from where they
-        are, but not without the buffer nodes within ``park_clearance`` of ``agent``'s goal."""
-        assert self.controller is not None and self.park_clearance is not None
-        problem, goal, _ = self._route_graph[agent]
-        n = problem.n_buffer
-        near = np.minimum(problem.D[goal, :n], problem.D[:n, goal]) < self.park_clearance
-        out = []
-        for b in self.agents:
-            if b == agent or b not in self._last_names or b not in self._route_graph:
-                continue
-            route = self.routes.get(b, [])
-            pb, gb, _ = self._route_graph[b]
-            k = self.controller.index.get(b, 0)
-            source = route[k - 1] if 1 <= k <= len(route) else (route[0] if route else None)
-            if source is None:
-                continue
-            key = (agent, b, id(problem), id(pb), source, gb)
-            if key not in self._cut_cache:
-                self._cut_cache[key] = _cut_off(pb.graph.distance, source, gb, near)
-            if self._cut_cache[key]:
-                out.append(b)
+            under_way = {b: v for b, v in others.items() if b in self._last_names and b not in dict(out)}
+            out += shut_out(problem, goal, under_way, self.park_clearance, self._cut_cache)
         return out
 
     def _parked_nodes(self, agent: str) -> List[int]:
         """Buffer nodes within ``ban_radius`` predicted steps of the goals of the agents that have arrived
         (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
-        out: List[int] = []
-        for b in self.agents:
-            if b == agent or b in self._last_names or b not in self._route_graph:
-                continue
-            problem, goal_id, _ = self._route_graph[b]
-            n = problem.n_buffer
-            near = np.minimum(problem.D[goal_id, :n], problem.D[:n, goal_id]) < self.ban_radius
-            out.extend(np.flatnonzero(near).tolist())
-        return out
+        parked = [self._route_graph[b][:2] for b in self.agents
+                  if b != agent and b not in self._last_names and b in self._route_graph]
+        return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, self.ban_radius))]
 
     def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
         """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
@@ -639,36 +595,6 @@ class SearchPolicy:
         self._seen_index[agent] = 0
         self.replan_time += time.perf_counter() - t1
         return new
-
-
-def _cut_off(adjacency: Any, source: int, target: int, banned: np.ndarray) -> bool:
-    """Whether ``target`` is reachable from ``source`` in the CSR ``adjacency`` but not without the
-    nodes where ``banned`` (a mask over its first nodes) is true (``source`` and ``target`` stay in)."""
-
-    def reaches(skip: np.ndarray) -> bool:
-        seen = skip.copy()
-        seen[source] = True
-        frontier = [source]
-        indptr, indices = adjacency.indptr, adjacency.indices
-        while frontier:
-            nxt = []
-            for u in frontier:
-                for v in indices[indptr[u]:indptr[u + 1]]:
-                    if v == target:
-                        return True
-                    if not seen[v]:
-                        seen[v] = True
-                        nxt.append(v)
-            frontier = nxt
-        return source == target
-
-    free = np.zeros(adjacency.shape[0], dtype=bool)
-    if not reaches(free):
-        return False
-    skip = free.copy()
-    skip[:len(banned)] = banned
-    skip[source] = skip[target] = False
-    return not reaches(skip)
 
 
 __all__ = ["Leg", "SearchPolicy"]

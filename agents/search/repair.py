@@ -14,7 +14,7 @@ only, never from the test problems (:attr:`EdgeMemory.frozen` stops it learning)
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Dict, Tuple, Union
+from typing import Any, Dict, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -58,6 +58,14 @@ class EdgeMemory:
         e = self._edge(u, v)
         if not self.frozen:
             self.successes[e] = self.successes.get(e, 0) + 1
+
+    def record_route(self, route: Sequence[int], reached: int, now: int, n_buffer: int) -> None:
+        """An agent on ``route`` (node ids; its targets ``route[1:]``) moved from target ``reached`` on to
+        target ``now``: record the buffer edges it got through (endpoints ``>= n_buffer`` are not)."""
+        for q in range(max(reached, 1), min(now, len(route))):  # targets reached .. now - 1 were reached
+            u, v = route[q - 1], route[q]
+            if u < n_buffer and v < n_buffer and u != v:
+                self.record_success(u, v)
 
     def is_removed(self, u: int, v: int) -> bool:
         f = self.failures.get((int(u), int(v)), 0)

@@ -225,15 +225,15 @@ def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
 def test_cut_off_tells_a_cut_way_from_no_way():
     from scipy import sparse
 
-    from agents.search.policy import _cut_off
+    from agents.search.dependencies import cut_off
 
     # a path 0 - 1 - 2 - 3 and a detour 0 - 4 - 3 around node 1 and 2
     edges = [(0, 1), (1, 2), (2, 3), (0, 4), (4, 3)]
     rows, cols = zip(*edges)
     adj = sparse.csr_matrix((np.ones(len(edges)), (rows, cols)), shape=(6, 6))
     ban = np.array([False, True, True, False, False, False])
-    assert not _cut_off(adj, 0, 3, ban)  # the detour
+    assert not cut_off(adj, 0, 3, ban)  # the detour
     ban[4] = True
-    assert _cut_off(adj, 0, 3, ban)  # every way passes the banned nodes
-    assert not _cut_off(adj, 0, 5, ban)  # no way at all: not cut off by the ban
-    assert not _cut_off(adj, 0, 3, np.array([True, False, False, True]))  # source and target stay in
+    assert cut_off(adj, 0, 3, ban)  # every way passes the banned nodes
+    assert not cut_off(adj, 0, 5, ban)  # no way at all: not cut off by the ban
+    assert not cut_off(adj, 0, 3, np.array([True, False, False, True]))  # source and target stay in
