@@ -234,10 +234,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
 
     def _obs(self) -> Union[Dict[str, np.ndarray], np.ndarray]:
         if self.sensor is not None:
-            if len(self._parked):
-                img = self.sensor.render(self._pos, agents=self._parked, agent_radius=self.scenario.agent_radius)
-            else:
-                img = self.sensor.render(self._pos)
+            img = self.sensor.render(self._pos, agents=self._parked, agent_radius=self.scenario.agent_radius)
             obs = {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
         else:
             p = self.normalize(self._pos)
@@ -284,20 +281,15 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         """
         sc = self.scenario
         r = sc.agent_radius
-        out: List[np.ndarray] = []
-        if self.parked_agents == 0:
-            return np.zeros((0, 2))
         d = goal - start
         length = float(np.hypot(d[0], d[1]))
         normal = np.array([-d[1], d[0]]) / length if length > 0 else np.array([1.0, 0.0])
+        taken = [start, goal]  # then the parked agents drawn so far
         for _ in range(self.parked_agents):
             p = start + rng.uniform(1 / 3, 2 / 3) * d + rng.uniform(-2 * r, 2 * r) * normal
-            clear = (sc.is_free(p) and np.hypot(*(p - start)) > 2 * r + 0.05
-                     and np.hypot(*(p - goal)) > 2 * r + 0.05
-                     and all(np.hypot(*(p - q)) > 2 * r + 0.05 for q in out))
-            if clear:
-                out.append(p)
-        return np.array(out).reshape(-1, 2)
+            if sc.is_free(p) and all(np.hypot(*(p - q)) > 2 * r + 0.05 for q in taken):
+                taken.append(p)
+        return np.array(taken[2:]).reshape(-1, 2)
 
     # ----------------------------------------------------------------- gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None):

@@ -510,8 +510,7 @@ class WaypointController:
                 a = self.rng.normal(size=2)
                 norm = float(np.hypot(a[0], a[1])) or 1.0
             side = self._side[agent]
-            step = np.array([-a[1] * side, a[0] * side]) / norm
-            step = step / max(1.0, float(np.abs(step).max()))  # full speed, inside the action box
+            step = np.array([-a[1] * side, a[0] * side]) / norm  # full speed
             self._escape_action[agent] = step
         return step.astype(np.asarray(action).dtype, copy=True)
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import breadth_first_order
 
 #: per agent: target index -> the (agent, target index) pairs that must be reached first
 Dependencies = List[Dict[int, List[Tuple[int, int]]]]
@@ -162,31 +164,13 @@ def nodes_near(problem: Any, node: int, radius: float) -> np.ndarray:
 def cut_off(adjacency: Any, source: int, target: int, banned: np.ndarray) -> bool:
     """Whether ``target`` is reachable from ``source`` in the CSR ``adjacency`` but not without the
     nodes where ``banned`` (a mask over its first nodes) is true (``source`` and ``target`` stay in)."""
-
-    def reaches(skip: np.ndarray) -> bool:
-        seen = skip.copy()
-        seen[source] = True
-        frontier = [source]
-        indptr, indices = adjacency.indptr, adjacency.indices
-        while frontier:
-            nxt = []
-            for u in frontier:
-                for v in indices[indptr[u]:indptr[u + 1]]:
-                    if v == target:
-                        return True
-                    if not seen[v]:
-                        seen[v] = True
-                        nxt.append(v)
-            frontier = nxt
-        return source == target
-
-    free = np.zeros(adjacency.shape[0], dtype=bool)
-    if not reaches(free):
+    if target not in breadth_first_order(adjacency, source, directed=True, return_predecessors=False):
         return False
-    skip = free.copy()
-    skip[:len(banned)] = banned
-    skip[source] = skip[target] = False
-    return not reaches(skip)
+    keep = np.ones(adjacency.shape[0])
+    keep[:len(banned)] = ~banned
+    keep[[source, target]] = 1.0
+    without = sparse.diags(keep) @ adjacency @ sparse.diags(keep)  # no edge into or out of a banned node
+    return target not in breadth_first_order(without.tocsr(), source, directed=True, return_predecessors=False)
 
 
 __all__ = ["Dependencies", "cut_off", "goal_passers", "nodes_near", "plan_dependencies", "proximity_relation",

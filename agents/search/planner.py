@@ -75,6 +75,11 @@ DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
 
 
+def _times(per_agent: Optional[int], k: int) -> Optional[int]:
+    """A solve's work budget from a per-agent one (``None``: no limit)."""
+    return None if per_agent is None else per_agent * k
+
+
 @dataclass
 class MultiAgentPlan:
     """Per-agent waypoints with departure times, from one CBS call.
@@ -470,9 +475,8 @@ class BufferPlanner:
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
-            per_agent = self.prioritized_expansions_per_agent
-            budget = None if per_agent is None else per_agent * k
-            res = solve_prioritized(inst, expansion_limit=budget, time_limit=self.time_limit)
+            res = solve_prioritized(inst, expansion_limit=_times(self.prioritized_expansions_per_agent, k),
+                                    time_limit=self.time_limit)
             if auto and res.status == "timeout":
                 stepped = self._step(inst)
                 stepped.message = f"{stepped.message} (after prioritized: {res.message})"
@@ -492,15 +496,13 @@ class BufferPlanner:
 
     def _repair(self, inst: MapfInstance) -> CBSResult:
         """The large-neighbourhood repair with this planner's budget and seed."""
-        per_agent = self.repair_expansions_per_agent
-        budget = None if per_agent is None else per_agent * inst.n_agents
-        return solve_lns(inst, expansion_limit=budget, time_limit=self.time_limit, seed=self.repair_seed)
+        return solve_lns(inst, expansion_limit=_times(self.repair_expansions_per_agent, inst.n_agents),
+                         time_limit=self.time_limit, seed=self.repair_seed)
 
     def _step(self, inst: MapfInstance) -> CBSResult:
         """The priority inheritance stepper with this planner's budget."""
-        per_agent = self.stepper_expansions_per_agent
-        budget = None if per_agent is None else per_agent * inst.n_agents
-        return solve_pibt(inst, expansion_limit=budget, time_limit=self.time_limit)
+        return solve_pibt(inst, expansion_limit=_times(self.stepper_expansions_per_agent, inst.n_agents),
+                          time_limit=self.time_limit)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

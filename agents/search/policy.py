@@ -511,8 +511,8 @@ class SearchPolicy:
         assert self.controller is not None
         n = len(self.planner.observations) if self.planner is not None else 0
         for a, seen in self._seen_index.items():
-            self.memory.record_route(self.routes.get(a, []), seen, self.controller.index.get(a, seen), n)
-            self._seen_index[a] = self.controller.index.get(a, seen)
+            now = self._seen_index[a] = self.controller.index.get(a, seen)
+            self.memory.record_route(self.routes.get(a, []), seen, now, n)
 
     def _exclude_edges(self, agent: str) -> np.ndarray:
         """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""

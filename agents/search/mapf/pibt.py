@@ -397,12 +397,11 @@ class _Stepper:
 
 def _overlap(inst: MapfInstance, nodes: Tuple[int, ...], what: str) -> Optional[str]:
     """Why agents at ``nodes`` (starts or goals) conflict among themselves, if they do."""
-    near = inst.near_mat
-    if near is None:
+    if inst.near is None:
         return None
     idx = {v: i for i, v in enumerate(nodes)}
     for i, v in enumerate(nodes):
-        for w in inst.near[v] if inst.near is not None else ():
+        for w in inst.near[v]:
             j = idx.get(w)
             if j is not None and j > i:
                 return f"the {what}s of agents {i} and {j} are within the proximity radius of each other"
