@@ -259,8 +259,13 @@ def build_model(cfg: TrainConfig):
     if constrained:
         lagrange = dict(cost_limit=cfg.cost_limit, lagrange_lr=cfg.lagrange_lr, lagrange_init=cfg.lagrange_init,
                         lagrange_max=cfg.lagrange_max)
+    # with parked agents, achieved goals are rendered without them and differ from observations
+    buffer_kwargs = dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio,
+                         achieved_goal_is_observation=image and not cfg.parked_agents)
     if cfg.init:
         kept: Dict[str, Any] = {} if cfg.augmentation is None else {"augmentation": cfg.augmentation}
+        if cfg.parked_agents:
+            kept["replay_buffer_kwargs"] = buffer_kwargs
         model = SafeGoalTD3.load(
             cfg.init, env=env, device="cpu", seed=cfg.seed, action_noise=noise, learning_starts=cfg.learning_starts,
             batch_size=cfg.batch_size, learning_rate=cfg.resolved_learning_rate(image),
@@ -275,8 +280,7 @@ def build_model(cfg: TrainConfig):
     return SafeGoalTD3(
         "MultiInputPolicy", env, learning_rate=cfg.resolved_learning_rate(image), buffer_size=cfg.buffer_size,
         learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, action_noise=noise,
-        replay_buffer_kwargs=dict(her_ratio=cfg.her_ratio, random_goal_ratio=cfg.random_goal_ratio,
-                                  achieved_goal_is_observation=image),
+        replay_buffer_kwargs=buffer_kwargs,
         actor_learning_rate=cfg.actor_learning_rate,
         problem_sampler=cfg.sampler, problem_sampler_kwargs=sampler_kwargs, env_id=cfg.env_id.split(":")[-1],
         policy_kwargs=dict(net_arch=list(cfg.net_arch), n_critics=cfg.n_critics,

@@ -140,8 +140,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
       straight line from the start to the goal (a third of the way to two thirds, up to two
       agent radii to either side), where they leave the start and the goal free and do not
       overlap (a place that does not fit is skipped). Panoramas show them as the
-      multi-agent env shows other agents; the goal's panorama does not, as there. For training
-      agents that meet parked agents on their way; ``info["parked"]`` holds their positions.
+      multi-agent env shows other agents; the goal's panorama does not, as there, and neither
+      does ``achieved_goal`` (the place seen as a goal, what hindsight relabelling takes), so
+      relabelled goals look like real ones. For training agents that meet parked agents on their
+      way; ``info["parked"]`` holds their positions.
 
     The apartment ids (``SafeApartment0-v0`` .. ``SafeApartment3-v0``) are in metres with
     ``agent_radius=0.2``, ``action_scale=0.25``, ``goal_threshold=0.5``, cost radius 1 and
@@ -235,7 +237,9 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     def _obs(self) -> Union[Dict[str, np.ndarray], np.ndarray]:
         if self.sensor is not None:
             img = self.sensor.render(self._pos, agents=self._parked, agent_radius=self.scenario.agent_radius)
-            obs = {"observation": img, "achieved_goal": img.copy(), "desired_goal": self._goal_image.copy()}
+            # the place as a goal shows it: goals' panoramas never show other agents
+            achieved = self.sensor.render(self._pos) if len(self._parked) else img.copy()
+            obs = {"observation": img, "achieved_goal": achieved, "desired_goal": self._goal_image.copy()}
         else:
             p = self.normalize(self._pos)
             obs = {"observation": p, "achieved_goal": p.copy(), "desired_goal": self.normalize(self._goal)}

@@ -163,7 +163,7 @@ def test_augmentation_can_be_switched_on_when_continuing_a_checkpoint():
     assert kept.augmentation is None  # None keeps the checkpoint's setting
 
 
-def test_parked_agents_reach_the_training_env():
+def test_parked_agents_reach_the_training_env(tmp_path):
     import argparse
 
     from agents.training import TrainConfig, build_model
@@ -175,7 +175,18 @@ def test_parked_agents_reach_the_training_env():
                                                          "--buffer-size", "200"]))
     assert cfg.parked_agents == 2
     cfg.validate()
-    env = build_model(cfg).get_env().envs[0].unwrapped
+    model = build_model(cfg)
+    env = model.get_env().envs[0].unwrapped
     assert env.parked_agents == 2
+    # relabelled goals come from achieved goals drawn without the parked agents, stored apart
+    assert not model.replay_buffer.achieved_goal_is_observation
+    ckpt = str(tmp_path / "plain.zip")
+    build_model(TrainConfig(env_id="SafeApartment0-v0", buffer_size=200)).save(ckpt)
+    cfg.init = ckpt
+    resumed = build_model(cfg)
+    assert resumed.get_env().envs[0].unwrapped.parked_agents == 2
+    assert not resumed.replay_buffer.achieved_goal_is_observation
+    assert build_model(TrainConfig(env_id="SafeApartment0-v0", init=ckpt, buffer_size=200)
+                       ).replay_buffer.achieved_goal_is_observation
     with pytest.raises(ValueError, match="parked_agents"):
         TrainConfig(parked_agents=-1).validate()

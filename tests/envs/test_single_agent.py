@@ -296,6 +296,8 @@ def test_parked_agents_stand_on_the_way_immovable_and_in_view():
             assert 1 / 3 <= t <= 2 / 3
         if len(parked):
             assert (obs["observation"] != obs0["observation"]).any()
+            # the achieved goal is the place as a goal shows it: without the parked agents
+            np.testing.assert_array_equal(obs["achieved_goal"], obs0["observation"])
             # drive straight at the first parked agent: the agent stops at contact, the parked one stays
             for _ in range(30):
                 d = parked[0] - info["position"]
@@ -306,6 +308,7 @@ def test_parked_agents_stand_on_the_way_immovable_and_in_view():
             assert np.linalg.norm(info["position"] - parked[0]) >= 2 * r - 0.02
         else:
             np.testing.assert_array_equal(obs["observation"], obs0["observation"])
+            np.testing.assert_array_equal(obs["achieved_goal"], obs["observation"])
     assert sum(counts) >= 8 and max(counts) == 2
     assert "parked" not in plain.reset(seed=0)[1]
 
