@@ -65,6 +65,27 @@ def figure_output_dir(args: argparse.Namespace, readme_dir: Path) -> Path:
                             flag="--refresh-readme" if args.refresh_readme else "--out")
 
 
+#: the per-run fields of ``runs.csv`` read as numbers
+NUMERIC_FIELDS = ("agents", "problem", "cost_max", "cost_mean", "collisions", "steps", "planning_time", "reached",
+                  "isr", "soc", "makespan", "c_max")
+
+
+def read_rows(path: Union[str, os.PathLike]) -> List[Dict[str, Any]]:
+    """The rows of a ``runs.csv`` of ``safe-mapf evaluate``, with numbers (integers as written)
+    and ``success`` parsed; empty fields stay empty strings."""
+    rows = []
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            r = dict(r)
+            for k in NUMERIC_FIELDS:
+                v = r.get(k)
+                if v not in (None, ""):
+                    r[k] = int(v) if v.lstrip("-").isdigit() else float(v)
+            r["success"] = r["success"] in ("True", "true", "1")
+            rows.append(r)
+    return rows
+
+
 class RowWriter:
     """Append rows (dicts) to a CSV file as they come; the header is the first row's keys.
 
@@ -102,4 +123,5 @@ class RowWriter:
         self.close()
 
 
-__all__ = ["FIGURES_OUT", "RowWriter", "add_figure_output_arguments", "check_output_dir", "figure_output_dir"]
+__all__ = ["FIGURES_OUT", "NUMERIC_FIELDS", "RowWriter", "add_figure_output_arguments", "check_output_dir",
+           "figure_output_dir", "read_rows"]

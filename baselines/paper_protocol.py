@@ -402,6 +402,39 @@ def choose_best_c_max(rows: Sequence[Dict[str, Any]], method: str = "ours"
     return kept, chosen
 
 
+def write_paper_outputs(rows: Sequence[Dict[str, Any]], out: Any, methods: Sequence[str], *, env_id: str,
+                        n_problems: int, seed: int, wall: float, cost_limit: float, grid: Sequence[float],
+                        targets: Dict[str, int]) -> Tuple[List[Dict[str, Any]], str]:
+    """Write the tables of paper-protocol ``rows`` into the folder ``out`` (``table.csv``,
+    ``table.json``, ``table.md`` and ``c_max.json``: ours' c_max chosen per cell on these runs,
+    :func:`choose_best_c_max`); ``runs.csv`` is the caller's. Returns the aggregated rows and the
+    Markdown text (header and table) of ``table.md``."""
+    import json
+    from pathlib import Path
+
+    from .evaluation import aggregate, markdown_table, write_csv
+
+    out = Path(out)
+    kept, chosen = choose_best_c_max(rows)
+    agg = aggregate(kept)
+    write_csv(agg, out / "table.csv")
+    (out / "table.json").write_text(json.dumps(agg, indent=1))
+    (out / "c_max.json").write_text(json.dumps(
+        {"chosen_on": "the test problems (the published code's convention)", "cost_limit": cost_limit,
+         "grid": list(grid), "targets": targets,
+         "chosen": [{"agents": k, "difficulty": d, "c_max": c} for (k, d), c in sorted(chosen.items())]}, indent=1))
+    header = (f"{env_id}, the paper's protocol: largest cumulative cost over agents until arrival, mean ± std over "
+              f"successful runs (success rate); {n_problems} problems per cell, seed {seed}, {wall:.0f} s; "
+              f"targets {targets}\n\n")
+    if chosen:
+        cells = ", ".join(f"{d} {k}: {c:g}" for (k, d), c in sorted(chosen.items()))
+        listed = ", ".join(f"{c:g}" for c in grid)
+        header += f"ours: c_max per cell chosen ON THE TEST PROBLEMS from {listed}: {cells}\n\n"
+    text = header + markdown_table(agg, list(methods))
+    (out / "table.md").write_text(text + "\n")
+    return agg, text
+
+
 __all__ = ["PAPER_C_MAX_FACTORS", "PAPER_PROTOCOL_METHODS", "PaperExecution", "PaperSetup", "choose_best_c_max",
            "evaluate_paper", "execute_paper", "grid_diameter", "make_paper_problems", "paper_targets",
-           "step_diameter"]
+           "step_diameter", "write_paper_outputs"]

@@ -21,29 +21,17 @@ successful runs, success rate) for ``--methods``.
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 from typing import Any, Dict, List
 
-from baselines.evaluation import _truthy, aggregate, markdown_table
+from baselines.evaluation import aggregate, markdown_table
+from baselines.output import read_rows as read_runs
 from baselines.paper_protocol import choose_best_c_max
-
-NUMERIC = ("agents", "problem", "cost_max", "cost_mean", "collisions", "steps", "planning_time", "reached", "c_max")
 
 
 def read_rows(paths: List[str]) -> List[Dict[str, Any]]:
     """The rows of every ``runs.csv``, with numbers and success parsed."""
-    rows = []
-    for path in paths:
-        with open(path, newline="") as f:
-            for r in csv.DictReader(f):
-                r = dict(r)
-                for k in NUMERIC:
-                    if k in r and r[k] != "":
-                        r[k] = float(r[k]) if k not in ("agents", "problem") else int(float(r[k]))
-                r["success"] = _truthy(r["success"])
-                rows.append(r)
-    return rows
+    return [r for path in paths for r in read_runs(path)]
 
 
 def main() -> None:

@@ -379,15 +379,9 @@ def _run_paper(args: argparse.Namespace) -> int:
 
     from agents import load_pretrained
     from baselines.cli import show_progress
-    from baselines.evaluation import aggregate, markdown_table, write_csv
     from baselines.methods import MARL_METHODS, get_methods
     from baselines.output import RowWriter
-    from baselines.paper_protocol import (
-        PAPER_PROTOCOL_METHODS,
-        PaperSetup,
-        choose_best_c_max,
-        evaluate_paper,
-    )
+    from baselines.paper_protocol import PAPER_PROTOCOL_METHODS, PaperSetup, evaluate_paper, write_paper_outputs
 
     names = list(dict.fromkeys(args.methods or PAPER_PROTOCOL_METHODS))
     allowed = PAPER_PROTOCOL_METHODS + MARL_METHODS
@@ -417,28 +411,13 @@ def _run_paper(args: argparse.Namespace) -> int:
         rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                               max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
                               candidates=args.paper_candidates, on_row=writer.write)
-    kept, chosen = choose_best_c_max(rows)
-    agg = aggregate(kept)
-    write_csv(agg, out / "table.csv")
-    (out / "table.json").write_text(json.dumps(agg, indent=1))
-    (out / "c_max.json").write_text(json.dumps(
-        {"chosen_on": "the test problems (the published code's convention)", "cost_limit": setup.cost_limit,
-         "grid": setup.c_max_grid(), "targets": setup.targets,
-         "chosen": [{"agents": k, "difficulty": d, "c_max": c} for (k, d), c in sorted(chosen.items())]}, indent=1))
-    table = markdown_table(agg, names)
-    wall = time.perf_counter() - t0
-    header = (f"{args.env}, the paper's protocol: largest cumulative cost over agents until arrival, mean ± std over "
-              f"successful runs (success rate); {args.problems} problems per cell, seed {args.seed}, {wall:.0f} s; "
-              f"targets {setup.targets}\n\n")
-    if chosen:
-        grid = ", ".join(f"{c:g}" for c in setup.c_max_grid())
-        cells = ", ".join(f"{d} {k}: {c:g}" for (k, d), c in sorted(chosen.items()))
-        header += f"ours: c_max per cell chosen ON THE TEST PROBLEMS from {grid}: {cells}\n\n"
-    (out / "table.md").write_text(header + table + "\n")
+    agg, text = write_paper_outputs(rows, out, names, env_id=args.env, n_problems=args.problems, seed=args.seed,
+                                    wall=time.perf_counter() - t0, cost_limit=setup.cost_limit,
+                                    grid=setup.c_max_grid(), targets=setup.targets)
     if args.json:
         print(json.dumps(agg))
     else:
-        print(header + table)
+        print(text)
         print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}, "
               f"{out / 'c_max.json'}")
     return 0

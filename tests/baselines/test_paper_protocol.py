@@ -240,3 +240,31 @@ def test_apartments_take_their_targets_from_the_geodesic_diameter_in_steps():
     steps = step_diameter(apt)
     assert steps == int(u.scenario.oracle.max_distance / u.action_scale) and steps > 40  # a 14 m walk, 0.25 m steps
     assert paper_targets("Apartment0", steps) == {"easy": steps // 8, "medium": steps // 4, "hard": steps // 2}
+
+
+def test_paper_cells_run_apart_give_the_rows_of_one_run(tmp_path, capsys):
+    """examples/paper_cells.py: each cell in its own process, merged in the order of one run, gives
+    the rows one command over all cells writes; finished cells are not run again."""
+    import importlib.util
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("paper_cells", root / "examples" / "paper_cells.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    common = ["--env", ENV, "--agents", "2", "1", "--difficulty", "easy", "--problems", "2", "--nodes", "60",
+              "--paper-candidates", "20", "--methods", "sorb", "ours"]
+    assert module.main([*common, "--workers", "2", "--keep-cells", "--out", str(tmp_path / "cells")]) == 0
+    assert "| Easy | 2 |" in capsys.readouterr().out
+    subprocess.run([sys.executable, "-m", "baselines.cli", "evaluate", "--protocol", "paper", *common,
+                    "--no-figure", "--no-progress", "--out", str(tmp_path / "one")], check=True, cwd=root,
+                   capture_output=True)
+    for name in ("runs.csv", "c_max.json"):
+        assert (tmp_path / "cells" / name).read_text() == (tmp_path / "one" / name).read_text()
+    assert (tmp_path / "cells" / "cells" / "1_easy.log").exists()
+    assert module.main([*common, "--workers", "1", "--out", str(tmp_path / "cells")]) == 0
+    assert "2 already run" in capsys.readouterr().err
+    assert not (tmp_path / "cells" / "cells").exists()  # merged again, then the cells removed
+    assert (tmp_path / "cells" / "runs.csv").read_text() == (tmp_path / "one" / "runs.csv").read_text()
