@@ -8,7 +8,13 @@
     python examples/visual_table.py examples/table2/apt0 examples/table2/apt1 examples/table2/apt2 examples/table2/apt3
 
 (each folder's ``c_max.json`` is the choice of an earlier ``--c-max auto --validation-problems 5``
-run, made on validation problems drawn with seed 10000).
+run, made on validation problems drawn with seed 10000). The same table under the paper's
+conventions, from folders of ``safe-mapf evaluate --protocol paper`` (or of
+``examples/paper_cells.py``), keeps per cell the c_max of ours that the run chose on its test
+problems:
+
+    python examples/visual_table.py --protocol paper examples/table2/paper/apt0 examples/table2/paper/apt1 \
+        examples/table2/paper/apt2 examples/table2/paper/apt3
 
 Reads each folder's ``runs.csv`` (or ``table.json``; written by ``safe-mapf evaluate``) and prints, per
 apartment, difficulty and agent count, SoRB + CBS and ours (largest cumulative cost over
@@ -22,12 +28,13 @@ measure) and by the median.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 from pathlib import Path
 
 from baselines.evaluation import aggregate
+from baselines.output import read_rows
+from baselines.paper_protocol import choose_best_c_max
 from baselines.paper_tables import TABLE2, TABLE2_METHODS, TABLE2_SCENES
 
 
@@ -41,6 +48,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("folders", nargs="+", type=Path, help="safe-mapf evaluate output folders, one per apartment")
     p.add_argument("--methods", nargs="+", default=["sorb", "ours"], help="our methods to show")
+    p.add_argument("--protocol", choices=("strict", "paper"), default="strict",
+                   help="paper: folders of --protocol paper runs (ours at the c_max each cell chose)")
     args = p.parse_args()
     head = ["Ours: env", "paper: scene", "Problem", "Agents"]
     for m in args.methods:
@@ -50,12 +59,12 @@ def main() -> None:
     for i, folder in enumerate(args.folders):
         runs = folder / "runs.csv"
         if runs.exists():  # aggregate the runs here, so that every figure of aggregate() is there
-            with open(runs, newline="") as f:
-                rows = aggregate(list(csv.DictReader(f)))
+            runs_rows = read_rows(runs)
+            rows = aggregate(choose_best_c_max(runs_rows)[0] if args.protocol == "paper" else runs_rows)
         else:
             rows = json.loads((folder / "table.json").read_text())
         meta = folder / "table.md"
-        env_id = meta.read_text().split(":", 1)[0] if meta.exists() else folder.name
+        env_id = meta.read_text().split(":", 1)[0].split(",")[0] if meta.exists() else folder.name
         cell = {(r["difficulty"], r["agents"], r["method"]): r for r in rows}
         scene = TABLE2_SCENES[i] if i < len(TABLE2_SCENES) else "-"
         keys = sorted({(r["difficulty"], r["agents"]) for r in rows},
