@@ -31,6 +31,8 @@ CHEAP = {
     "python examples/centerdot_table.py examples/table1/centerdot_paper examples/table1/centerdot_strict",
     "python examples/visual_table.py examples/table2/apt0 examples/table2/apt1 examples/table2/apt2 "
     "examples/table2/apt3",
+    "python examples/visual_table.py --protocol paper examples/table2/paper/apt0 examples/table2/paper/apt1 "
+    "examples/table2/paper/apt2 examples/table2/paper/apt3",
 }
 
 
