@@ -97,7 +97,8 @@ class EvaluationWorker:
     """One worker: the setup rebuilt from its payload, the function that runs one task, and one
     env per agent count."""
 
-    def __init__(self, payload: Dict[str, Any], run: RunFn, max_cycles: int, threads: int = 1) -> None:
+    def __init__(self, payload: Dict[str, Any], run: RunFn, max_cycles: int, threads: int = 1,
+                 env_kwargs: Optional[Dict[str, Any]] = None) -> None:
         import torch
 
         torch.set_num_threads(threads)
@@ -106,6 +107,7 @@ class EvaluationWorker:
         self.setup = payload["cls"](**fields)
         self.run_fn = run
         self.max_cycles = max_cycles
+        self.env_kwargs = dict(env_kwargs or {})
         self.envs: Dict[int, Any] = {}
 
     def run(self, task: Tuple[int, Any, Any, int, Any]) -> Tuple[int, Dict[str, Any], Any]:
@@ -116,23 +118,25 @@ class EvaluationWorker:
         index, method, problem, seed, memory = task
         k = problem.n_agents
         if k not in self.envs:
-            self.envs[k] = safe_mapf_envs.parallel_env(self.setup.env_id, n_agents=k, max_cycles=self.max_cycles)
+            self.envs[k] = safe_mapf_envs.parallel_env(self.setup.env_id, n_agents=k, max_cycles=self.max_cycles,
+                                                       **self.env_kwargs)
         row, ex = self.run_fn(self.setup, self.envs[k], method, problem, seed, memory=memory)
         return index, row, ex
 
 
 def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycles: int, run: RunFn,
-               address: Optional[str] = None,
-               memories: Optional[Dict[str, Any]] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
+               address: Optional[str] = None, memories: Optional[Dict[str, Any]] = None,
+               env_kwargs: Optional[Dict[str, Any]] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
     """Run ``tasks`` (``(method, problem)`` pairs) on Ray workers, each with ``run`` (e.g.
     :func:`baselines.evaluation.run_row`); yields ``(index, row, execution)`` as results arrive
     (``index``: the task's position). ``memories``: frozen edge memories by method name, each
-    run's starting point."""
+    run's starting point; ``env_kwargs``: more arguments of the workers' parallel envs (e.g.
+    ``agent_collisions=False``)."""
     ray = init_ray(address)
     payload = ray.put(setup_payload(setup))
     n_workers = max(1, min(len(tasks), int(ray.available_resources().get("CPU", 1))))
     Worker = ray.remote(num_cpus=1)(EvaluationWorker)
-    workers = [Worker.remote(payload, run, max_cycles) for _ in range(n_workers)]
+    workers = [Worker.remote(payload, run, max_cycles, env_kwargs=env_kwargs) for _ in range(n_workers)]
     pool = ray.util.ActorPool(workers)
     items = [(i, m, p, seed, (memories or {}).get(m.name)) for i, (m, p) in enumerate(tasks)]
     # the longest runs first (many agents, far goals, a search to plan), so none is left to run alone at the end
@@ -145,5 +149,22 @@ def run_on_ray(setup: Any, tasks: Sequence[Tuple[Any, Any]], seed: int, max_cycl
             ray.kill(w)
 
 
-__all__ = ["EvaluationWorker", "MissingExtraError", "RAY_HINT", "RunFn", "init_ray", "require_ray", "run_on_ray",
-           "setup_payload"]
+def in_task_order(results: Iterable[Tuple[int, Dict[str, Any], Any]],
+                  on_arrival: Optional[Callable[[], None]] = None) -> Iterable[Tuple[int, Dict[str, Any], Any]]:
+    """``(index, row, execution)`` results that arrive in any order (:func:`run_on_ray`), handed on in
+    the order of their indices 0, 1, 2, ... as soon as each one's predecessors are in;
+    ``on_arrival()`` is called as each arrives (e.g. a progress bar's update)."""
+    pending: Dict[int, Tuple[Dict[str, Any], Any]] = {}
+    nxt = 0
+    for i, row, ex in results:
+        if on_arrival is not None:
+            on_arrival()
+        pending[i] = (row, ex)
+        while nxt in pending:
+            row_n, ex_n = pending.pop(nxt)
+            yield nxt, row_n, ex_n
+            nxt += 1
+
+
+__all__ = ["EvaluationWorker", "MissingExtraError", "RAY_HINT", "RunFn", "in_task_order", "init_ray", "require_ray",
+           "run_on_ray", "setup_payload"]

@@ -315,17 +315,11 @@ def evaluate(
         if env is not None:
             env.close()
     else:
-        from .distributed import run_on_ray
+        from .distributed import in_task_order, run_on_ray
 
-        pending: Dict[int, Any] = {}
-        for i, row, ex in run_on_ray(setup, tasks, seed, max_cycles, run_row, address=ray, memories=frozen):
-            pending[i] = (row, ex)
-            while len(rows) in pending:  # hand rows on in order
-                j = len(rows)
-                row_j, ex_j = pending.pop(j)
-                done(row_j, tasks[j][1], ex_j)
-            if bar is not None:
-                bar.update(1)
+        results = run_on_ray(setup, tasks, seed, max_cycles, run_row, address=ray, memories=frozen)
+        for j, row_j, ex_j in in_task_order(results, on_arrival=bar.update if bar is not None else None):
+            done(row_j, tasks[j][1], ex_j)
     if bar is not None:
         bar.close()
     return rows

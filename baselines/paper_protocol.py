@@ -321,17 +321,23 @@ def evaluate_paper(
     factors: Sequence[float] = PAPER_C_MAX_FACTORS,
     candidates: int = 1000,
     on_row: Optional[Callable[[Dict[str, Any]], None]] = None,
+    ray: Optional[str] = None,
 ) -> List[Dict[str, Any]]:
     """Every method on the same paper-protocol problems; ``ours`` once per c_max of the grid.
 
     One row per (method, c_max, agents, difficulty, problem), with the fields of
     :data:`~baselines.evaluation.ROW_FIELDS` (``collisions`` is 0: agents pass through each
     other; ``planning_time`` is not measured). ``policy_agents`` restricts the methods without
-    search to these agent counts (the paper: 1). ``on_row(row)`` is called after each run (e.g. to
-    write rows as they come).
+    search to these agent counts (the paper: 1). ``on_row(row)`` is called after each run, in the
+    order of the rows (e.g. to write rows as they come). ``ray`` runs the runs as Ray tasks, as
+    :func:`~baselines.evaluation.evaluate` does: the same rows in the same order.
     """
     import safe_mapf_envs
 
+    if ray is not None:
+        from .distributed import require_ray
+
+        require_ray()  # fail before any work if Ray is missing
     unknown = [m.name for m in methods if m.name not in PAPER_PROTOCOL_METHODS + MARL_METHODS]
     if unknown:
         raise ValueError(f"the paper's protocol defines {', '.join(PAPER_PROTOCOL_METHODS)}; not {unknown}")
@@ -351,8 +357,22 @@ def evaluate_paper(
 
         bar = tqdm(total=len(runs), desc="evaluate (paper protocol)", unit="run", mininterval=2.0)
     rows: List[Dict[str, Any]] = []
+
+    def done(row: Dict[str, Any]) -> None:
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
+
     env, cell = None, None
     try:
+        if ray is not None:
+            from .distributed import in_task_order, run_on_ray
+
+            results = run_on_ray(setup, runs, seed, max_cycles, paper_row, address=ray,
+                                 env_kwargs={"agent_collisions": False})
+            for _, row, _ex in in_task_order(results, on_arrival=bar.update if bar is not None else None):
+                done(row)
+            return rows
         for m, p in runs:
             if env is None or cell != p.n_agents:
                 if env is not None:
@@ -360,15 +380,7 @@ def evaluate_paper(
                 env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=p.n_agents, max_cycles=max_cycles,
                                                   agent_collisions=False)
                 cell = p.n_agents
-            ex = execute_paper(env, setup, m, p, seed=seed + p.index)
-            rows.append({
-                "method": m.name, "agents": p.n_agents, "difficulty": p.difficulty, "problem": p.index,
-                "success": ex.success, "cost_max": float(ex.cost.max()), "cost_mean": float(ex.cost.mean()),
-                "collisions": 0, "steps": ex.steps, "planning_time": 0.0, "plan_status": ex.plan_status,
-                "reached": int(ex.reached.sum()), "c_max": m.c_max if m.search else math.inf,
-            })
-            if on_row is not None:
-                on_row(rows[-1])
+            done(paper_row(setup, env, m, p, seed)[0])
             if bar is not None:
                 bar.update(1)
     finally:
@@ -377,6 +389,21 @@ def evaluate_paper(
         if bar is not None:
             bar.close()
     return rows
+
+
+def paper_row(setup: PaperSetup, env, method: Method, problem: Problem, seed: int,
+              memory: Any = None) -> Tuple[Dict[str, Any], PaperExecution]:
+    """Run ``method`` on ``problem`` in ``env`` under the paper's conventions; returns ``(row, execution)``.
+    The run is seeded with ``seed + problem.index`` wherever it runs; ``memory`` is not used (the
+    paper's graph learns nothing; the argument keeps the signature of the Ray workers' runs)."""
+    ex = execute_paper(env, setup, method, problem, seed=seed + problem.index)
+    row = {
+        "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty, "problem": problem.index,
+        "success": ex.success, "cost_max": float(ex.cost.max()), "cost_mean": float(ex.cost.mean()),
+        "collisions": 0, "steps": ex.steps, "planning_time": 0.0, "plan_status": ex.plan_status,
+        "reached": int(ex.reached.sum()), "c_max": method.c_max if method.search else math.inf,
+    }
+    return row, ex
 
 
 def choose_best_c_max(rows: Sequence[Dict[str, Any]], method: str = "ours"
@@ -436,5 +463,5 @@ def write_paper_outputs(rows: Sequence[Dict[str, Any]], out: Any, methods: Seque
 
 
 __all__ = ["PAPER_C_MAX_FACTORS", "PAPER_PROTOCOL_METHODS", "PaperExecution", "PaperSetup", "choose_best_c_max",
-           "evaluate_paper", "execute_paper", "grid_diameter", "make_paper_problems", "paper_targets",
+           "evaluate_paper", "execute_paper", "grid_diameter", "make_paper_problems", "paper_row", "paper_targets",
            "step_diameter", "write_paper_outputs"]

@@ -5,7 +5,8 @@
             --workers 2 --out examples/table2/paper/apt$a
     done
 
-The paper's protocol runs in one process (it has no ``--ray``). Its cells are independent:
+``safe-mapf evaluate --protocol paper --ray`` runs the runs on several cores in one process; this
+script runs whole cells apart instead, and can be resumed. The cells are independent:
 each (agent count, difficulty) draws its problems from the seed alone, every run is seeded with
 the seed plus the problem's index, and ours' c_max is chosen per cell. So the cells can run as
 separate ``safe-mapf evaluate --protocol paper`` processes (``--workers`` at a time, the longest

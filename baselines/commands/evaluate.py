@@ -388,7 +388,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     if set(names) - set(allowed):
         raise ValueError(f"--protocol paper runs {', '.join(allowed)}; not {sorted(set(names) - set(allowed))}")
     marl = _marl_models(args, names)
-    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget), ("--ray", args.ray)):
+    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
                              "0.1 .. 1, chosen per cell on the test problems)")
@@ -410,7 +410,7 @@ def _run_paper(args: argparse.Namespace) -> int:
     with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
         rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                               max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                              candidates=args.paper_candidates, on_row=writer.write)
+                              candidates=args.paper_candidates, on_row=writer.write, ray=args.ray)
     agg, text = write_paper_outputs(rows, out, names, env_id=args.env, n_problems=args.problems, seed=args.seed,
                                     wall=time.perf_counter() - t0, cost_limit=setup.cost_limit,
                                     grid=setup.c_max_grid(), targets=setup.targets)
