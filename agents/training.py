@@ -60,6 +60,8 @@ class TrainConfig:
     """self-sampling: share of each refill's problems that cross a narrow passage, not scored by the critic"""
     parked_agents: int = 0
     """other agents standing still on the way of each training episode (the env's ``parked_agents``)"""
+    parked_fraction: float = 1.0
+    """share of the training episodes that have the parked agents (the env's ``parked_fraction``)"""
     oracle_band: Tuple[float, float] = (2.0, 15.0)
     """oracle sampler: band of ground-truth geodesic goal distances (world units)"""
     cost_limit: float = 10.0
@@ -158,6 +160,8 @@ class TrainConfig:
             raise ValueError(f"narrow_fraction must be in [0, 1], got {self.narrow_fraction!r}")
         if not isinstance(self.parked_agents, int) or self.parked_agents < 0:
             raise ValueError(f"parked_agents must be an integer >= 0, got {self.parked_agents!r}")
+        if not 0.0 <= self.parked_fraction <= 1.0:
+            raise ValueError(f"parked_fraction must be in [0, 1], got {self.parked_fraction!r}")
         if self.narrow_fraction > 0 and self.sampler != "self":
             raise ValueError("narrow_fraction shapes the self-sampler's candidates: use it with sampler 'self'")
         if self.eval_freq < 1:
@@ -229,12 +233,17 @@ def _extractor_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
 
 
 def make_training_env(cfg: TrainConfig):
-    """The env a stage trains in: ``cfg.env_id``, with ``cfg.parked_agents`` parked agents on the way."""
+    """The env a stage trains in: ``cfg.env_id``, with ``cfg.parked_agents`` parked agents on the way
+    (in a ``cfg.parked_fraction`` share of its episodes)."""
     import gymnasium as gym
 
     import safe_mapf_envs  # noqa: F401
 
-    kwargs: Dict[str, Any] = {"parked_agents": cfg.parked_agents} if cfg.parked_agents else {}
+    kwargs: Dict[str, Any] = {}
+    if cfg.parked_agents:
+        kwargs["parked_agents"] = cfg.parked_agents
+        if cfg.parked_fraction < 1.0:
+            kwargs["parked_fraction"] = cfg.parked_fraction
     return gym.make(cfg.env_id, **kwargs)
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .base import RENDER_MODES, NavigationEnvBase
-from .checks import check_action, check_count, check_goal_distance, parse_reset_options
+from .checks import check_action, check_count, check_goal_distance, parse_reset_options, show
 from .formats import flat_space, flatten_observation
 from .world import World
 
@@ -143,7 +143,9 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
       multi-agent env shows other agents; the goal's panorama does not, as there, and neither
       does ``achieved_goal`` (the place seen as a goal, what hindsight relabelling takes), so
       relabelled goals look like real ones. For training agents that meet parked agents on their
-      way; ``info["parked"]`` holds their positions.
+      way; ``info["parked"]`` holds their positions;
+    - ``parked_fraction`` (1.0): the share of episodes that have the parked agents (each
+      episode draws it; the others have none), so an agent can learn both kinds.
 
     The apartment ids (``SafeApartment0-v0`` .. ``SafeApartment3-v0``) are in metres with
     ``agent_radius=0.2``, ``action_scale=0.25``, ``goal_threshold=0.5``, cost radius 1 and
@@ -186,8 +188,12 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         sensor_kwargs: Optional[Dict[str, Any]] = None,
         observation_format: str = "dict",
         parked_agents: int = 0,
+        parked_fraction: float = 1.0,
     ) -> None:
         self.parked_agents = check_count(parked_agents, "parked_agents", 0)
+        if not 0.0 <= parked_fraction <= 1.0:  # also refuses NaN
+            raise ValueError(f"parked_fraction must be in [0, 1], got {show(parked_fraction)}")
+        self.parked_fraction = float(parked_fraction)
         self._setup(
             layout, render_mode, obs_type=obs_type, agent_radius=agent_radius, cost_radius=cost_radius,
             cost_fn=cost_fn, boundary_cost=boundary_cost, goal_threshold=goal_threshold, action_noise=action_noise,
@@ -305,7 +311,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         self._goal = goal
         if self.sensor is not None:
             self._goal_image = self.sensor.render(goal)
-        self._parked = self.draw_parked(self.np_random, start, goal)
+        if self.parked_fraction < 1.0 and self.np_random.random() >= self.parked_fraction:
+            self._parked = np.zeros((0, 2))  # an episode without them
+        else:
+            self._parked = self.draw_parked(self.np_random, start, goal)
         self._world = World(sc.size, sc.boxes, np.vstack([start[None], self._parked]), sc.agent_radius, self.substeps)
         for i in range(1, 1 + len(self._parked)):
             self._world.park(i)

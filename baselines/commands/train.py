@@ -50,6 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--parked-agents", type=int, default=d.parked_agents, metavar="M",
                    help="other agents standing still near the straight line of each training episode, seen in "
                         "the panoramas and in the way (default 0)")
+    g.add_argument("--parked-fraction", type=float, default=d.parked_fraction, metavar="P",
+                   help="share of the training episodes that have the --parked-agents (default 1: all)")
     g.add_argument("--oracle-band", type=float, nargs=2, metavar=("LO", "HI"), default=list(d.oracle_band),
                    help="oracle sampler: geodesic goal distance band (world units)")
     g = p.add_argument_group("constrained stage")

@@ -172,12 +172,12 @@ def test_parked_agents_reach_the_training_env(tmp_path):
     parser = argparse.ArgumentParser()
     train_cmd.register(parser.add_subparsers())
     cfg = train_cmd.config_from_args(parser.parse_args(["train", "--env", "SafeApartment0-v0", "--parked-agents", "2",
-                                                         "--buffer-size", "200"]))
-    assert cfg.parked_agents == 2
+                                                         "--parked-fraction", "0.3", "--buffer-size", "200"]))
+    assert cfg.parked_agents == 2 and cfg.parked_fraction == 0.3
     cfg.validate()
     model = build_model(cfg)
     env = model.get_env().envs[0].unwrapped
-    assert env.parked_agents == 2
+    assert env.parked_agents == 2 and env.parked_fraction == 0.3
     # relabelled goals come from achieved goals drawn without the parked agents, stored apart
     assert not model.replay_buffer.achieved_goal_is_observation
     ckpt = str(tmp_path / "plain.zip")
@@ -190,3 +190,5 @@ def test_parked_agents_reach_the_training_env(tmp_path):
                        ).replay_buffer.achieved_goal_is_observation
     with pytest.raises(ValueError, match="parked_agents"):
         TrainConfig(parked_agents=-1).validate()
+    with pytest.raises(ValueError, match="parked_fraction"):
+        TrainConfig(parked_agents=2, parked_fraction=2.0).validate()

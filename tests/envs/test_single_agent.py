@@ -313,8 +313,24 @@ def test_parked_agents_stand_on_the_way_immovable_and_in_view():
     assert "parked" not in plain.reset(seed=0)[1]
 
 
+def test_parked_fraction_mixes_episodes_with_and_without_parked_agents():
+    def counts(fraction):
+        env = gym.make("SafeApartment0-v0", parked_agents=2, parked_fraction=fraction)
+        out = [len(env.reset(seed=seed)[1]["parked"]) for seed in range(40)]
+        env.close()
+        return out
+
+    assert not any(counts(0.0))
+    half, full = counts(0.5), counts(1.0)
+    assert sum(c > 0 for c in full) >= 30  # nearly every episode has them
+    assert 8 <= sum(c > 0 for c in half) <= 32 and max(half) == 2
+
+
 def test_parked_agents_is_checked():
     with pytest.raises(ValueError, match="parked_agents"):
         gym.make("SafeApartment0-v0", parked_agents=-1)
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="parked_fraction"):
+            gym.make("SafeApartment0-v0", parked_agents=1, parked_fraction=bad)
     with pytest.raises(ValueError, match="parked agents"):
         gym.make_vec("SafeCentralObstacle-v0", num_envs=2, vectorization_mode="vector_entry_point", parked_agents=1)
