@@ -110,7 +110,8 @@ class SearchPolicy:
             where it stands on the whole graph less the edges it failed on (its start is attached
             to the nodes the critic puts nearest); only if that fails too it gives the waypoint up.
             These replans keep clear of the nodes within ``ban_radius`` of the goals of agents that
-            have arrived (parked there) while a route around them exists.
+            have arrived (parked there), or, where that cuts every route, within 0.85 or 0.7 of it
+            (the widest berth the graph leaves past an agent parked beside the only door).
             The edge it failed on is recorded in ``memory``.
         ban_radius: see ``replan_when_stuck``.
         park_clearance: with ``hold="order"``, agents also park after those their goal would shut
@@ -441,11 +442,8 @@ class SearchPolicy:
 
     def _new_episode(self, current: Dict[str, np.ndarray], goals: Dict[str, np.ndarray],
                      episode_start: Optional[Union[bool, np.ndarray]]) -> bool:
-        if self.controller is None:
-            return True
-        if episode_start is not None and bool(np.any(episode_start)):
-            return True
-        if any(a not in self._goals for a in current) or not set(current) <= self._last_names:
+        if (self.controller is None or (episode_start is not None and bool(np.any(episode_start)))
+                or any(a not in self._goals for a in current) or not set(current) <= self._last_names):
             return True
         return any(not np.array_equal(goals[a], self._goals[a]) for a in current)
 
@@ -534,12 +532,13 @@ class SearchPolicy:
             out += shut_out(problem, goal, under_way, self.park_clearance, self._cut_cache)
         return out
 
-    def _parked_nodes(self, agent: str) -> List[int]:
-        """Buffer nodes within ``ban_radius`` predicted steps of the goals of the agents that have arrived
-        (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
+    def _parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
+        """Buffer nodes within ``share * ban_radius`` predicted steps of the goals of the agents that have
+        arrived (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
         parked = [self._route_graph[b][:2] for b in self.agents
                   if b != agent and b not in self._last_names and b in self._route_graph]
-        return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, self.ban_radius))]
+        r = share * self.ban_radius
+        return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, r))]
 
     def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
         """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
@@ -564,12 +563,14 @@ class SearchPolicy:
         parked = self._parked_nodes(agent)
         # (nodes banned from now on, nodes left out of this plan, edges left out), tried in turn: around
         # the failed waypoints and their neighbourhoods; around the failed waypoints only (the
-        # neighbourhood held the only doorway); localised, from where it stands over any node; and at
-        # last over the edges it failed on too (it was not where its route said when it failed, or
-        # another agent was in the way)
+        # neighbourhood held the only doorway); localised, from where it stands over any node, with a
+        # berth of 1, 0.85 or 0.7 ban radii around parked agents (one beside the only door: the widest
+        # berth left); and at last over the edges it failed on too (it was not where its route said
+        # when it failed, or another agent was in the way)
         attempts = [(self._banned[agent], self._banned[agent] + parked, edges),
-                    (list(self._failed[agent]), self._failed[agent] + parked, edges),
-                    ([], parked, edges), ([], [], self.memory.removed()), ([], [], None)]
+                    (list(self._failed[agent]), self._failed[agent] + parked, edges), ([], parked, edges),
+                    *[([], self._parked_nodes(agent, f), edges) for f in (0.85, 0.7)],
+                    ([], [], self.memory.removed()), ([], [], None)]
         tried = []
         for banned, exclude, exclude_edges in attempts:
             key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist())
@@ -590,8 +591,7 @@ class SearchPolicy:
             new = AgentPlan(current.waypoints[k + 1:], current.goal)
             self.routes[agent] = route[k + 1:]
             if agent in self._route_graph:  # the rest of the route, from here
-                problem, goal_id, _ = self._route_graph[agent]
-                self._route_graph[agent] = (problem, goal_id, self.controller.t)
+                self._route_graph[agent] = (*self._route_graph[agent][:2], self.controller.t)
         self._seen_index[agent] = 0
         self.replan_time += time.perf_counter() - t1
         return new

@@ -203,6 +203,32 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
     assert policy.stats.replans == 1 and not set(policy.routes["agent_0"]) & set(near)
 
 
+def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth_left(world, planner):
+    """agent_1 parks 1.8 from the only door, on the way to agent_0's goal: every route passes within the
+    ban radius (2.4) of it, so a stuck agent_0 replans with the widest smaller berth that leaves one
+    (0.7 of it): through the door, but clear of the nodes right by the parked agent, which the shortest
+    route takes."""
+    goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.8, 5.0], np.float32)
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.4)
+    both = {"agent_0": {"observation": START, "desired_goal": goal_0},
+            "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
+    policy.predict(both)
+    policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
+    nodes = planner.observations
+    assert DOOR in policy._parked_nodes("agent_0") and DOOR in policy._parked_nodes("agent_0", 0.85)
+    berth = policy._parked_nodes("agent_0", 0.7)
+    assert DOOR not in berth and len(berth)
+    shortest = planner.plan(START[None], goal_0[None])
+    assert set(shortest.nodes[0]) & set(berth)  # the shortest route passes right by the parked agent
+    for _ in range(200):  # agent_0 stands still where it is: it gets stuck and replans
+        if policy.stats.replans:
+            break
+        policy.predict({"agent_0": both["agent_0"]})
+    route = policy.routes["agent_0"]
+    assert policy.stats.replans == 1 and DOOR in route and not set(route) & set(berth)
+    assert (np.linalg.norm(nodes[[i for i in route if i < len(nodes)]] - goal_1, axis=1) >= 0.7 * 2.4).all()
+
+
 def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
     """agent_1's goal lies 1.5 from the only door; agent_0's every way to its goal goes through the door.
     With ``park_clearance`` agent_1 parks only after agent_0 has arrived; without it (the default), nothing
