@@ -36,15 +36,17 @@ other that is moot, and it is not reproduced.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .evaluation import DIFFICULTIES, Problem
+from .evaluation import DIFFICULTIES, Problem, aggregate, markdown_table, write_csv
 from .methods import MARL_METHODS, Method
 
 #: the published code's c_max grid, as factors of the trained cost limit
@@ -436,11 +438,6 @@ def write_paper_outputs(rows: Sequence[Dict[str, Any]], out: Any, methods: Seque
     ``table.json``, ``table.md`` and ``c_max.json``: ours' c_max chosen per cell on these runs,
     :func:`choose_best_c_max`); ``runs.csv`` is the caller's. Returns the aggregated rows and the
     Markdown text (header and table) of ``table.md``."""
-    import json
-    from pathlib import Path
-
-    from .evaluation import aggregate, markdown_table, write_csv
-
     out = Path(out)
     kept, chosen = choose_best_c_max(rows)
     agg = aggregate(kept)
