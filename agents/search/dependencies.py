@@ -9,10 +9,14 @@ its node before the first has got far enough along its own route.
 
 :func:`plan_dependencies` reads these orderings off a plan: for agent ``j`` and each target index
 ``q`` of its route (a waypoint, or its goal at ``q = len(route)``), the pairs ``(i, r)`` such that
-``j`` may head for target ``q`` only once agent ``i`` has reached its target ``r`` (or has arrived).
-Every dependency goes forward in plan time (``i`` reaches ``r`` strictly before ``j`` reaches
-``q`` in the plan), so the graph has no cycle and an execution that respects it cannot deadlock
-on it.
+``j`` may head for target ``q`` only once agent ``i`` has reached its target ``r`` and set off from
+it (or has arrived). The plan orders *arrivals* (``i`` reaches ``r`` before ``j`` reaches ``q``),
+the controller gates *departures* (``j`` sets off for ``q`` only after ``i`` left ``r``), which is
+stricter: two agents that swap places in a corridor can each wait for the other to leave first.
+Where such waits close a cycle, the dependency in it that is furthest behind in plan time is
+weakened to the latest target of ``i`` that the plan has it leave before ``j`` sets off (dropped
+when there is none), until no cycle is left: an execution that respects the result cannot
+deadlock on it.
 """
 from __future__ import annotations
 
@@ -29,6 +33,7 @@ Dependencies = List[Dict[int, List[Tuple[int, int]]]]
 def plan_dependencies(
     routes: Sequence[Sequence[int]],
     arrivals: Sequence[Sequence[int]],
+    departures: Sequence[Sequence[int]],
     goals: Sequence[int],
     goal_arrivals: Sequence[int],
     close: np.ndarray,
@@ -38,6 +43,7 @@ def plan_dependencies(
     Args:
         routes: per agent, the node ids of its route (its start first, its goal excluded).
         arrivals: per agent, the plan time at which it reaches each node of its route.
+        departures: per agent, the plan time at which it leaves each node of its route.
         goals: per agent, its goal's node id.
         goal_arrivals: per agent, the plan time at which it reaches its goal.
         close: ``close[u, v]``: nodes ``u`` and ``v`` are near enough for two agents there to
@@ -48,16 +54,19 @@ def plan_dependencies(
         agent ``i`` has reached its target ``r`` (``r = len(routes[i])``: arrived at its goal).
         Of several visits of ``i`` near one target of ``j``, only the latest that the plan puts
         before ``j``'s arrival counts; when ``i`` also reaches its next target before that
-        arrival, ``j`` waits for that one (``i`` has left the place, not just got there).
+        arrival, ``j`` waits for that one (``i`` has left the place, not just got there). The
+        dependencies have no cycle (see the module docstring).
     """
     k = len(routes)
-    if not (len(arrivals) == len(goals) == len(goal_arrivals) == k):
-        raise ValueError(f"routes, arrivals, goals and goal_arrivals must have one entry per agent ({k})")
+    if not (len(arrivals) == len(departures) == len(goals) == len(goal_arrivals) == k):
+        raise ValueError(f"routes, arrivals, departures, goals and goal_arrivals must have one entry per agent ({k})")
     nodes = []
     times = []
     for a in range(k):
         if len(arrivals[a]) != len(routes[a]):
             raise ValueError(f"agent {a}: {len(routes[a])} route nodes but {len(arrivals[a])} arrival times")
+        if len(departures[a]) != len(routes[a]):
+            raise ValueError(f"agent {a}: {len(routes[a])} route nodes but {len(departures[a])} departure times")
         nodes.append(np.asarray([*routes[a], goals[a]], dtype=np.int64))
         times.append(np.asarray([*arrivals[a], goal_arrivals[a]], dtype=np.float64))
     out: Dependencies = [{} for _ in range(k)]
@@ -72,7 +81,61 @@ def plan_dependencies(
                 m = int(np.flatnonzero(mask[:, q]).max())
                 r = m + 1 if m + 1 < len(ti) and ti[m + 1] < tj[q] else m
                 out[j].setdefault(q, []).append((i, r))
-    return out
+    # plan time of "a sets off for its target q" (q = len(route) + 1: a has arrived)
+    leaves = [np.asarray([*departures[a], goal_arrivals[a]], dtype=np.float64) for a in range(k)]
+    while True:
+        cycle = _wait_cycle(out, [len(r) for r in routes])
+        if cycle is None:
+            return out
+        j, q, i, r = max(cycle, key=lambda e: leaves[e[2]][e[3]] - leaves[e[0]][e[1] - 1])
+        out[j][q].remove((i, r))
+        before = np.flatnonzero(leaves[i][:r] < leaves[j][q - 1])
+        if len(before):
+            out[j][q].append((i, int(before.max())))
+        if not out[j][q]:
+            del out[j][q]
+
+
+def _wait_cycle(deps: Dependencies, lengths: Sequence[int]) -> Optional[List[Tuple[int, int, int, int]]]:
+    """A cycle of waits in ``deps`` as its dependencies ``(j, q, i, r)``, or ``None``.
+
+    Events are ``(a, q)``: agent ``a`` sets off for its target ``q`` (``q = lengths[a] + 1``: it
+    arrives); ``(a, q)`` follows ``(a, q - 1)``, and a dependency ``(i, r)`` of ``j``'s target ``q``
+    makes ``(j, q)`` follow ``(i, r + 1)``."""
+    into: Dict[Tuple[int, int], List[Tuple[Tuple[int, int], Optional[Tuple[int, int, int, int]]]]] = {}
+    for j, d in enumerate(deps):
+        for q in range(2, lengths[j] + 2):
+            into.setdefault((j, q), []).append(((j, q - 1), None))
+        for q, pairs in d.items():
+            for i, r in pairs:
+                into.setdefault((j, q), []).append(((i, r + 1), (j, q, i, r)))
+    # depth-first search backwards along "follows"; a node met again on the stack closes a cycle
+    state: Dict[Tuple[int, int], int] = {}
+    for root in into:
+        if state.get(root):
+            continue
+        stack = [(root, iter(into.get(root, [])))]
+        path: List[Optional[Tuple[int, int, int, int]]] = []
+        state[root] = 1
+        while stack:
+            node, it = stack[-1]
+            step = next(it, None)
+            if step is None:
+                state[node] = 2
+                stack.pop()
+                if path:
+                    path.pop()
+                continue
+            prev, dep = step
+            if state.get(prev) == 1:  # back on the stack: the edges from there to here, and this one
+                at = [n for n, _ in stack].index(prev)
+                edges = path[at:] + [dep]
+                return [e for e in edges if e is not None]
+            if not state.get(prev):
+                state[prev] = 1
+                stack.append((prev, iter(into.get(prev, []))))
+                path.append(dep)
+    return None
 
 
 def proximity_relation(D: np.ndarray, radius: float, n_buffer: int, n_agents: int) -> np.ndarray:

@@ -48,15 +48,19 @@ from .models import (
     policy_fn,
 )
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
-from .repair import EdgeMemory
+from .repair import EdgeMemory, past_failed_waypoints
 
 
-def _option_names(cls: type) -> Tuple[set, set]:
-    """The keyword options of :class:`BufferPlanner` and of the policy class ``cls``."""
+def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
+    """``options`` split into those of :class:`BufferPlanner` and those of the policy class ``cls``."""
     planner = set(inspect.signature(BufferPlanner.__init__).parameters) - {"self", "observations", "D", "C",
                                                                           "pairwise"}
     policy = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}  # type: ignore
-    return planner, policy
+    unknown = set(options) - planner - policy
+    if unknown:
+        raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner)}; "
+                        f"policy options: {sorted(policy)}")
+    return {k: v for k, v in options.items() if k in planner}, {k: v for k, v in options.items() if k in policy}
 
 
 @dataclass(frozen=True)
@@ -111,8 +115,10 @@ class SearchPolicy:
             to the nodes the critic puts nearest); only if that fails too it gives the waypoint up.
             These replans keep clear of the nodes within ``ban_radius`` of the goals of agents that
             have arrived (parked there), or, where that cuts every route, within 0.85 or 0.7 of it
-            (the widest berth the graph leaves past an agent parked beside the only door).
-            The edge it failed on is recorded in ``memory``.
+            (the widest berth the graph leaves past an agent parked beside the only door). A
+            waypoint it failed on twice that such a replan cannot avoid, it heads past
+            (:func:`~agents.search.repair.past_failed_waypoints`). The edge it failed on is
+            recorded in ``memory``.
         ban_radius: see ``replan_when_stuck``.
         park_clearance: with ``hold="order"``, agents also park after those their goal would shut
             out (:func:`~agents.search.dependencies.shut_out`, this many predicted steps); ``None``: off.
@@ -225,11 +231,7 @@ class SearchPolicy:
                 :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
         """
         check_models(critic, driver)
-        planner_names, policy_names = _option_names(cls)
-        unknown = set(options) - planner_names - policy_names
-        if unknown:
-            raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner_names)}; "
-                            f"policy options: {sorted(policy_names)}")
+        planner_options, kwargs = _split_options(cls, options)
         if n_nodes < 2:
             raise ValueError(f"n_nodes must be >= 2, got {n_nodes}")
         if nodes is None:
@@ -242,11 +244,9 @@ class SearchPolicy:
             obs = buffer_observations(nodes, n_nodes, np.random.default_rng(seed))
         else:
             obs = np.asarray(nodes)
-        planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate,
-                                           **{k: v for k, v in options.items() if k in planner_names})
+        planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate, **planner_options)
         if sparsify is not None:
             planner, _ = planner.sparsified(sparsify)
-        kwargs = {k: v for k, v in options.items() if k in policy_names}
         kwargs.setdefault("seed", seed)
         return cls(planner, driver if driver is not None else critic, **kwargs)
 
@@ -279,16 +279,10 @@ class SearchPolicy:
                 memory = EdgeMemory.from_arrays(f)
         except (OSError, KeyError, ValueError, EOFError) as e:
             raise ValueError(f"{path} is not a saved SearchPolicy graph: {e}") from None
-        planner_names, policy_names = _option_names(cls)
-        unknown = set(options) - planner_names - policy_names
-        if unknown:
-            raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner_names)}; "
-                            f"policy options: {sorted(policy_names)}")
+        planner_options, kwargs = _split_options(cls, options)
         if memory.n_nodes != len(obs):
             raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
-        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate),
-                                **{**saved, **{k: v for k, v in options.items() if k in planner_names}})
-        kwargs = {k: v for k, v in options.items() if k in policy_names}
+        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), **{**saved, **planner_options})
         kwargs.setdefault("memory", memory)
         return cls(planner, driver if driver is not None else critic, **kwargs)
 
@@ -499,7 +493,8 @@ class SearchPolicy:
         if radius is None or problem is None or len(names) < 2:
             return {a: AgentPlan(p.waypoints, p.goal, None, p.starts_at_first) for a, p in plans.items()}
         close = proximity_relation(problem.D, radius, problem.n_buffer, problem.n_agents)
-        deps = plan_dependencies(plan.nodes, plan.node_arrivals, problem.goal_ids, plan.arrival_times, close)
+        deps = plan_dependencies(plan.nodes, plan.node_arrivals, plan.depart_times, problem.goal_ids,
+                                 plan.arrival_times, close)
         return {a: AgentPlan(p.waypoints, p.goal, None, p.starts_at_first,
                              after={q: [(names[i], r) for i, r in v] for q, v in deps[j].items()})
                 for j, (a, p) in enumerate(plans.items())}
@@ -583,9 +578,11 @@ class SearchPolicy:
                 self._banned[agent] = banned
                 break
         if sub.solved:
-            new = sub.agent_plans([agent], hold="waits")[agent]
-            self.routes[agent] = list(sub.nodes[0])
             assert sub.problem is not None  # a solved plan keeps its problem graph
+            new = sub.agent_plans([agent], hold="waits")[agent]
+            keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent])
+            new = AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
+            self.routes[agent] = [sub.nodes[0][i] for i in keep]
             self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
         else:  # no other way on the graph: give the waypoint up
             new = AgentPlan(current.waypoints[k + 1:], current.goal)

@@ -14,7 +14,7 @@ only, never from the test problems (:attr:`EdgeMemory.frozen` stops it learning)
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Dict, Sequence, Tuple, Union
+from typing import Any, Dict, List, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -137,4 +137,31 @@ class EdgeMemory:
             return cls.from_arrays(f)
 
 
-__all__ = ["Edge", "EdgeMemory"]
+def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed: Sequence[int],
+                          times: int = 2, detour: float = 1.5) -> List[int]:
+    """The positions in ``route`` to keep once the waypoints an agent failed on again and again are skipped.
+
+    A learned policy can fail on one waypoint episode after episode (one in a doorway, which it
+    hovers in front of) and pass it when it heads for the node beyond. A replan that finds no way
+    but through such a waypoint (failed ``times`` times or more) heads past it instead, where the
+    critic finds going straight on at most ``detour`` times as long as going through it (a wall
+    between would make it far longer).
+
+    Args:
+        route: node ids of a new route (its start first, its goal left out).
+        goal: the goal's node id; ``D``: predicted distances between the nodes.
+        failed: the waypoints the agent failed to reach so far (one entry per failure).
+    """
+    keep = list(range(len(route)))
+    i = 1
+    while i < len(keep):
+        u, v = route[keep[i - 1]], route[keep[i]]
+        w = route[keep[i + 1]] if i + 1 < len(keep) else goal
+        if list(failed).count(v) >= times and D[u, w] <= detour * (D[u, v] + D[v, w]):
+            del keep[i]
+        else:
+            i += 1
+    return keep
+
+
+__all__ = ["Edge", "EdgeMemory", "past_failed_waypoints"]

@@ -155,6 +155,72 @@ def test_a_lost_agent_localises_and_replans_from_where_it_stands(world, planner)
     assert before_door not in edges_of(new)
 
 
+def stand_until_replans(policy, obs, replans):
+    """Keep the agent standing at ``obs`` until it has replanned ``replans`` times in all."""
+    for _ in range(400):
+        if policy.stats.replans >= replans:
+            return
+        policy.predict(obs)
+    raise AssertionError("the agent never replanned")
+
+
+class OpenWorld(WallWorld):
+    """The room without its wall: the stand-in critic measures straight lines."""
+
+    def _seg(self, a, b):
+        length = np.linalg.norm(np.asarray(b, np.float64) - np.asarray(a, np.float64), axis=-1)
+        return np.maximum(length, 1.0), np.zeros_like(length)
+
+
+def test_an_agent_stuck_twice_on_its_only_way_heads_past_that_waypoint():
+    """Nodes on a line, 2 apart, with edges only between neighbours: every route passes the node after the
+    start. A learned policy can fail again and again on one waypoint (in a doorway, say) that it passes
+    when it heads for the node beyond; stuck on it a second time, the agent heads past it, where the
+    critic finds that hardly longer than going through it."""
+    world = OpenWorld()
+    nodes = np.array([(1.0 + 2 * i, 5.0) for i in range(5)], np.float32)
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=1.5)
+    here = {"observation": np.array([0.0, 5.0], np.float32), "desired_goal": np.array([9.5, 5.0], np.float32)}
+    policy.predict(here)
+    assert policy.routes["agent_0"][1] == 0  # the first node on the way
+    stand_until_replans(policy, here, 1)
+    assert policy.routes["agent_0"][1] == 0  # stuck once: the same way again (its only one)
+    stand_until_replans(policy, here, 2)
+    assert policy.routes["agent_0"][1] == 1  # stuck twice: it heads for the node beyond
+    np.testing.assert_array_equal(policy.waypoints("agent_0")[1], nodes[1])
+
+
+def test_past_failed_waypoints_skips_only_what_failed_twice_and_is_no_detour():
+    from agents.search.repair import past_failed_waypoints
+
+    # nodes 0..4 on a line, 1 apart, and node 5 beside node 2 but behind a wall from node 0 (9 steps round it)
+    x = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 2.0])
+    D = np.abs(x[:, None] - x[None, :])
+    D[0, 5] = D[5, 0] = 9.0
+    route, goal = [0, 1, 2, 3], 4
+    assert past_failed_waypoints(route, goal, D, failed=[2]) == [0, 1, 2, 3]  # failed once: kept
+    assert past_failed_waypoints(route, goal, D, failed=[2, 2]) == [0, 1, 3]
+    assert past_failed_waypoints(route, goal, D, failed=[2, 3, 2, 3]) == [0, 1]  # then heads for the goal
+    assert past_failed_waypoints(route, goal, D, failed=[0, 0]) == [0, 1, 2, 3]  # the start stays
+    # the waypoint in the wall's door: heading past it is 9 steps against 1 + 1 through it
+    assert past_failed_waypoints([0, 1], 5, D, failed=[1, 1]) == [0, 1]
+    assert past_failed_waypoints([0, 1], 5, D, failed=[1, 1], detour=5.0) == [0]
+
+
+def test_an_agent_stuck_twice_in_front_of_a_door_keeps_the_door(world, planner):
+    """Behind the door the critic sees a wall: heading past the door is no way, so the door stays."""
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy.predict({"observation": START, "desired_goal": GOAL})
+    before_door = first_edge_into(list(policy.routes["agent_0"]), DOOR)
+    drive_until_stuck(policy, before_door)
+    route = policy.routes["agent_0"]
+    assert route[1] == DOOR
+    stand_until_replans(policy, {"observation": planner.observations[before_door[0]], "desired_goal": GOAL}, 2)
+    assert policy.routes["agent_0"][1] == DOOR
+
+
 def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_path):
     policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
     policy.predict({"observation": START, "desired_goal": GOAL})
