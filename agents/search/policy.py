@@ -564,7 +564,7 @@ class SearchPolicy:
         # when it failed, or another agent was in the way)
         attempts = [(self._banned[agent], self._banned[agent] + parked, edges),
                     (list(self._failed[agent]), self._failed[agent] + parked, edges), ([], parked, edges),
-                    *[([], self._parked_nodes(agent, f), edges) for f in (0.85, 0.7)],
+                    *[([], self._parked_nodes(agent, share), edges) for share in (0.85, 0.7)],
                     ([], [], self.memory.removed()), ([], [], None)]
         tried = []
         for banned, exclude, exclude_edges in attempts:

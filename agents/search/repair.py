@@ -13,6 +13,7 @@ only, never from the test problems (:attr:`EdgeMemory.frozen` stops it learning)
 """
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Any, Dict, List, Sequence, Tuple, Union
 
@@ -152,12 +153,13 @@ def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed
         goal: the goal's node id; ``D``: predicted distances between the nodes.
         failed: the waypoints the agent failed to reach so far (one entry per failure).
     """
+    fails = Counter(failed)
     keep = list(range(len(route)))
     i = 1
     while i < len(keep):
         u, v = route[keep[i - 1]], route[keep[i]]
         w = route[keep[i + 1]] if i + 1 < len(keep) else goal
-        if list(failed).count(v) >= times and D[u, w] <= detour * (D[u, v] + D[v, w]):
+        if fails[v] >= times and D[u, w] <= detour * (D[u, v] + D[v, w]):
             del keep[i]
         else:
             i += 1
