@@ -18,7 +18,8 @@ current waypoint's observation. Rules, all from observations only:
 - **goal order** (optional): an agent does not set off for its goal while ``goal_order`` names
   agents that still have to pass it (an agent parked at its goal is an immovable obstacle, and
   one that parks in a doorway before another has gone through shuts that one out for good);
-  same patience as the plan order;
+  same patience as the plan order. Where the two orders meet (the plan sends the parking agent
+  first, the goal order holds it for the other), the other agent goes first;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
   first, ties broken by index); the paper states this rule, we implement it. Only two agents
@@ -163,6 +164,7 @@ class WaypointController:
             reached its target ``r`` (or arrived), since ``other``'s route passes ``agent``'s
             goal. Asked afresh at every step (routes change when agents replan); an agent waits
             on another for at most ``order_patience`` steps in which that one makes no progress.
+            An agent it holds this way no longer waits for it by the plan's order.
     """
 
     def __init__(
@@ -239,6 +241,8 @@ class WaypointController:
         self.goal_order = goal_order
         #: per agent: the agents it no longer waits on before parking (its patience ran out)
         self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
+        #: agent -> the agent it holds its parking for (goal order), as of its last check
+        self._parks_after: Dict[str, str] = {}
         self._live: set = set(self.plans)
         self.t = 0
         self.stats = ControllerStats()
@@ -289,12 +293,14 @@ class WaypointController:
 
     def _waits_on(self, agent: str, q: int) -> Optional[str]:
         """The agent ``agent`` must wait for before setting off for its target ``q`` (``None``: it may go)."""
+        self._parks_after.pop(agent, None)
         deps = self._after[agent].get(q, [])
         for b, r in list(deps):
             if b not in self._live or self.index.get(b, 0) > r:
                 deps.remove((b, r))  # reached (or arrived): satisfied for good
                 continue
-            if self._patience_over(agent, q, b):
+            # b holds its parking until this agent has passed its goal: this one goes first
+            if self._patience_over(agent, q, b) or self._parks_after.get(b) == agent:
                 deps.remove((b, r))
                 continue
             return b
@@ -306,6 +312,7 @@ class WaypointController:
             if self._patience_over(agent, q, b):
                 self._gave_up[agent].add(b)
                 continue
+            self._parks_after[agent] = b
             return b
         return None
 

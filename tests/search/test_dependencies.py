@@ -82,6 +82,32 @@ def test_two_agents_swapping_places_do_not_wait_for_each_other():
     assert c.index == {"agent_0": 4, "agent_1": 4} and c.stats.waits <= 2
 
 
+def test_an_agent_that_holds_its_parking_for_another_lets_that_one_go_first():
+    """The plan sends b through a corridor first, to park at its far end, and a after it (a waits for b
+    to arrive); a's route runs past b's goal, so the goal order holds b at its last waypoint until a has
+    gone by. The two holds meet: a goes first (traced on Apartment3's held-out hard 5-agent problem 0,
+    where both stood until the order's patience ran out and b then parked in the corridor's mouth)."""
+    wa = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    wb = np.array([[0.0, 5.0], [2.0, 5.0]])
+    plans = {"a": AgentPlan(wa, np.array([6.0, 0.0]), starts_at_first=True, after={2: [("b", 2)]}),
+             "b": AgentPlan(wb, np.array([4.0, 1.0]), starts_at_first=True)}
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=40,
+                           goal_order=lambda agent: [("a", 2)] if agent == "b" else [])
+    live, arrived = set(plans), {}
+    for t in range(20):
+        if not live:
+            break
+        obs = {x: c.current_goal(x) for x in sorted(live)}  # every agent stands on its current target
+        c.act(obs)
+        for x in sorted(live):
+            if c.index[x] == len(plans[x].waypoints) and np.array_equal(obs[x], plans[x].goal):
+                arrived[x] = t  # at its goal: parked, out of the episode
+                live.discard(x)
+    assert set(arrived) == {"a", "b"} and max(arrived.values()) < 10 and c.stats.waits < 10
+    assert plans["a"].after is not None and c._after["a"] == {2: []}  # a no longer waits for b
+
+
 def test_dependencies_follow_the_plan_and_never_wait_in_a_cycle():
     """On random plans every dependency points from an earlier plan arrival to a later one, and the
     controller's waits (departures) have no cycle, so no execution that keeps them deadlocks on them."""
