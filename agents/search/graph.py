@@ -497,11 +497,28 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
             keep[short & (C < c) & bwd[i][None, :]] = True
 
 
+def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn, places: np.ndarray,
+                  slack: float, d_max: Optional[float] = None) -> np.ndarray:
+    """``(M, M)`` mask of the edges ``u -> v`` among ``observations`` (distances ``D``) that pass
+    one of ``places``: going through it is at most ``slack`` longer than the edge. An edge that
+    ends at such a place passes it too. ``d_max`` as for :func:`attach_endpoints`."""
+    within = getattr(pairwise, "within", None)
+    score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
+    to_place, _ = score(observations, places)
+    from_place, _ = score(places, observations)
+    out = np.zeros(D.shape, dtype=bool)
+    for j in range(len(places)):
+        out |= to_place[:, j, None] + from_place[j, None, :] <= D + slack
+    np.fill_diagonal(out, False)
+    return out
+
+
 def build_problem_graph(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
     starts: np.ndarray, goals: np.ndarray, *, d_max: float, c_max: float, endpoint_edges: int = 3,
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
+    avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -511,6 +528,9 @@ def build_problem_graph(
     use (e.g. a waypoint an agent failed to reach), ``exclude_edges`` (``(E, 2)`` pairs of buffer
     node ids) edges it must not use (e.g. edges agents failed to traverse); ``max_edges`` caps the
     edges leaving each buffer node towards other buffer nodes at its that many shortest ones.
+    ``avoid`` (optional) holds observations of places no edge may pass (e.g. agents parked
+    there): an edge ``u -> v`` is left out when going through one of them is at most
+    ``avoid_slack`` longer, ``D[u, o] + D[o, v] <= D[u, v] + avoid_slack``.
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -524,6 +544,10 @@ def build_problem_graph(
     keep[ex, :] = False
     keep[:, ex] = False
     keep[ee[:, 0], ee[:, 1]] = False
+    if avoid is not None and len(avoid):
+        passing = passing_edges(D2, obs, pairwise, np.asarray(avoid, dtype=obs.dtype), avoid_slack, d_max)
+        keep[passing] = False
+        ee = np.concatenate([ee, np.argwhere(passing & (D2 < d_max))])
     if max_edges is not None:
         cap_out_edges(keep, D2, max_edges, n)
     ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee)
@@ -532,4 +556,4 @@ def build_problem_graph(
 
 
 __all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
-           "edge_mask", "problem_edge_mask", "relax_cost_locally"]
+           "edge_mask", "passing_edges", "problem_edge_mask", "relax_cost_locally"]

@@ -48,7 +48,7 @@ from .models import (
     policy_fn,
 )
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
-from .repair import EdgeMemory, past_failed_waypoints
+from .repair import EdgeMemory, edges_near, past_failed_waypoints
 
 
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
@@ -545,7 +545,7 @@ class SearchPolicy:
         route = self.routes[agent]
         leg = self.leg(agent)
         if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
-            self._failed_edges.setdefault(agent, []).append((leg.source, leg.target))
+            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, self.ban_radius))
             self.memory.record_failure(leg.source, leg.target)
         # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
         # nodes right by it
@@ -556,24 +556,26 @@ class SearchPolicy:
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
         edges = self._exclude_edges(agent)
         parked = self._parked_nodes(agent)
-        # (nodes banned from now on, nodes left out of this plan, edges left out), tried in turn: around
-        # the failed waypoints and their neighbourhoods; around the failed waypoints only (the
-        # neighbourhood held the only doorway); localised, from where it stands over any node, with a
-        # berth of 1, 0.85 or 0.7 ban radii around parked agents (one beside the only door: the widest
-        # berth left); and at last over the edges it failed on too (it was not where its route said
-        # when it failed, or another agent was in the way)
-        attempts = [(self._banned[agent], self._banned[agent] + parked, edges),
-                    (list(self._failed[agent]), self._failed[agent] + parked, edges), ([], parked, edges),
-                    *[([], self._parked_nodes(agent, share), edges) for share in (0.85, 0.7)],
-                    ([], [], self.memory.removed()), ([], [], None)]
+        # where the agents that arrived stand (last seen), parked
+        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names and b in self._last_obs]
+        # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
+        # a parked agent), tried in turn: around the failed waypoints and their neighbourhoods; around
+        # the failed waypoints only (the neighbourhood held the only doorway); localised, from where it
+        # stands over any node, with a berth of 1, 0.85 or 0.7 ban radii around parked agents (one
+        # beside the only door: the widest berth left), then past them; and at last over the edges it
+        # failed on too (it was not where its route said when it failed, or another agent was in the way)
+        attempts = [(self._banned[agent], self._banned[agent] + parked, edges, True),
+                    (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
+                    *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
+                    ([], parked, edges, False), ([], [], self.memory.removed(), False), ([], [], None, False)]
         tried = []
-        for banned, exclude, exclude_edges in attempts:
-            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist())
+        for banned, exclude, exclude_edges, avoid in attempts:
+            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at))
             if key in tried:
                 continue
             tried.append(key)
             sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
-                         exclude_edges=exclude_edges)
+                         exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None)
             if sub.solved:
                 self._banned[agent] = banned
                 break

@@ -166,4 +166,18 @@ def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed
     return keep
 
 
-__all__ = ["Edge", "EdgeMemory", "past_failed_waypoints"]
+def edges_near(D: np.ndarray, u: int, v: int, radius: float) -> np.ndarray:
+    """``(E, 2)`` node pairs: the edge ``u -> v`` and every edge from a node within ``radius``
+    predicted steps of ``u`` to one within ``radius`` of ``v``.
+
+    An agent that failed on ``u -> v`` because the critic takes two far places for near ones (a
+    wormhole: two panoramas alike) finds the same shortcut again between the nodes right by them;
+    its replans leave them all out.
+    """
+    a = np.union1d(np.flatnonzero(np.minimum(D[u], D[:, u]) < radius), [u])
+    b = np.union1d(np.flatnonzero(np.minimum(D[v], D[:, v]) < radius), [v])
+    pairs = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
+    return pairs[pairs[:, 0] != pairs[:, 1]]
+
+
+__all__ = ["Edge", "EdgeMemory", "edges_near", "past_failed_waypoints"]

@@ -82,6 +82,22 @@ def test_two_agents_swapping_places_do_not_wait_for_each_other():
     assert c.index == {"agent_0": 4, "agent_1": 4} and c.stats.waits <= 2
 
 
+def run_teleported(c, plans, steps=60):
+    """Drive ``c`` with agents that stand on their current target at every step; an agent at its goal
+    after its last waypoint is parked (out of the episode). Returns per agent the step it parked."""
+    live, arrived = set(plans), {}
+    for t in range(steps):
+        if not live:
+            break
+        obs = {x: c.current_goal(x) for x in sorted(live)}
+        c.act(obs)
+        for x in sorted(live):
+            if c.index[x] == len(plans[x].waypoints) and np.array_equal(obs[x], plans[x].goal):
+                arrived[x] = t
+                live.discard(x)
+    return arrived
+
+
 def test_an_agent_that_holds_its_parking_for_another_lets_that_one_go_first():
     """The plan sends b through a corridor first, to park at its far end, and a after it (a waits for b
     to arrive); a's route runs past b's goal, so the goal order holds b at its last waypoint until a has
@@ -94,16 +110,7 @@ def test_an_agent_that_holds_its_parking_for_another_lets_that_one_go_first():
     c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
                            stuck_window=None, order_patience=40,
                            goal_order=lambda agent: [("a", 2)] if agent == "b" else [])
-    live, arrived = set(plans), {}
-    for t in range(20):
-        if not live:
-            break
-        obs = {x: c.current_goal(x) for x in sorted(live)}  # every agent stands on its current target
-        c.act(obs)
-        for x in sorted(live):
-            if c.index[x] == len(plans[x].waypoints) and np.array_equal(obs[x], plans[x].goal):
-                arrived[x] = t  # at its goal: parked, out of the episode
-                live.discard(x)
+    arrived = run_teleported(c, plans, steps=20)
     assert set(arrived) == {"a", "b"} and max(arrived.values()) < 10 and c.stats.waits < 10
     assert plans["a"].after is not None and c._after["a"] == {2: []}  # a no longer waits for b
 

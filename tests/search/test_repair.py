@@ -329,3 +329,67 @@ def test_cut_off_tells_a_cut_way_from_no_way():
     assert cut_off(adj, 0, 3, ban)  # every way passes the banned nodes
     assert not cut_off(adj, 0, 5, ban)  # no way at all: not cut off by the ban
     assert not cut_off(adj, 0, 3, np.array([True, False, False, True]))  # source and target stay in
+
+
+def test_a_replan_does_not_pass_where_a_parked_agent_stands():
+    """agent_1 arrives short of its goal (an agent parks where it first comes within the goal radius),
+    standing on the straight way of agent_0, which gets stuck against it. Its replans leave out the nodes
+    by agent_1's goal (none here) and every edge that passes where agent_1 was last seen, so agent_0
+    goes around it; without that the replan runs straight through it again."""
+    world = OpenWorld()
+    nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0, 9.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=1.0)
+    start, goal_0 = np.array([3.0, 5.0], np.float32), np.array([7.0, 5.0], np.float32)
+    stands = np.array([5.0, 5.0], np.float32)  # where agent_1 parks, short of its goal
+    both = {"agent_0": {"observation": start, "desired_goal": goal_0},
+            "agent_1": {"observation": np.array([5.0, 3.0], np.float32), "desired_goal": np.array([5.0, 5.6], np.float32)}}
+    policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=0.5)
+    policy.predict(both)
+    policy.predict({**both, "agent_1": {**both["agent_1"], "observation": stands}})
+    assert 12 in policy.routes["agent_0"]  # straight on, by the node at (5, 5)
+    stand_until_replans(policy, {"agent_0": both["agent_0"]}, 1)  # agent_1 arrived; agent_0 is stuck
+    route = [int(i) for i in policy.routes["agent_0"] if i < len(nodes)]
+    assert policy._parked_nodes("agent_0") == [] and 12 not in route and len(route) >= 3
+    ways = np.concatenate([[start], nodes[route], [goal_0]]).astype(np.float64)
+    along = np.linspace(0.0, 1.0, 21)[:, None]
+    clear = [np.linalg.norm(a + along * (b - a) - stands, axis=1).min() for a, b in zip(ways[:-1], ways[1:])]
+    assert min(clear) >= 1.9  # every leg goes around it
+
+
+def test_passing_edges_are_those_that_go_through_a_place():
+    from agents.search.graph import passing_edges
+
+    world = OpenWorld()
+    pts = np.array([(0.0, 0.0), (4.0, 0.0), (2.0, 3.0), (2.0, 0.5)], np.float32)
+    D, _ = world.pairwise(pts, pts)
+    out = passing_edges(D, pts, world.pairwise, np.array([(2.0, 0.0)], np.float32), slack=1.0)
+    assert out[0, 1] and out[1, 0]  # straight through it
+    assert out[0, 3] and out[3, 1]  # ending by it (within the slack), starting by it
+    assert not out[0, 2] and not out[2, 1] and not out[2, 0]  # well clear of it
+    assert not out.diagonal().any()
+
+
+def test_edges_near_a_failed_edge_are_those_between_the_two_places():
+    from agents.search.repair import edges_near
+
+    pts = np.array([(0.0, 0.0), (0.5, 0.0), (9.0, 0.0), (9.4, 0.0), (5.0, 0.0)])
+    D = np.abs(pts[:, None, 0] - pts[None, :, 0])
+    pairs = {tuple(e) for e in edges_near(D, 0, 2, radius=1.0).tolist()}
+    assert pairs == {(0, 2), (0, 3), (1, 2), (1, 3)}  # from the first place to the second, not back
+    assert {tuple(e) for e in edges_near(D, 0, 1, radius=1.0).tolist()} == {(0, 1), (1, 0)}
+
+
+def test_a_stuck_agent_leaves_out_the_edges_beside_the_one_it_failed_on(world, planner):
+    """Two panoramas alike make the critic take two far places for near ones, between every pair of
+    nodes right by them: after failing on one such edge, an agent's replans leave them all out."""
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.5)
+    policy.predict({"observation": START, "desired_goal": GOAL})
+    bad = first_edge_into(list(policy.routes["agent_0"]), DOOR)
+    drive_until_stuck(policy, bad)
+    out = {tuple(e) for e in policy._exclude_edges("agent_0").tolist()}
+    D = planner.D
+    beside = [(u, v) for u in range(len(D)) for v in range(len(D)) if u != v
+              and min(D[u, bad[0]], D[bad[0], u]) < 2.5 and min(D[v, bad[1]], D[bad[1], v]) < 2.5]
+    assert bad in out and len(beside) > 1 and set(beside) <= out
+    assert policy.memory.failures == {bad: 1}  # the memory counts the edge it failed on only
