@@ -557,7 +557,7 @@ class SearchPolicy:
         edges = self._exclude_edges(agent)
         parked = self._parked_nodes(agent)
         # where the agents that arrived stand (last seen), parked
-        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names and b in self._last_obs]
+        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
         # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
         # a parked agent), tried in turn: around the failed waypoints and their neighbourhoods; around
         # the failed waypoints only (the neighbourhood held the only doorway); localised, from where it

@@ -343,7 +343,8 @@ def test_a_replan_does_not_pass_where_a_parked_agent_stands():
     start, goal_0 = np.array([3.0, 5.0], np.float32), np.array([7.0, 5.0], np.float32)
     stands = np.array([5.0, 5.0], np.float32)  # where agent_1 parks, short of its goal
     both = {"agent_0": {"observation": start, "desired_goal": goal_0},
-            "agent_1": {"observation": np.array([5.0, 3.0], np.float32), "desired_goal": np.array([5.0, 5.6], np.float32)}}
+            "agent_1": {"observation": np.array([5.0, 3.0], np.float32),
+                        "desired_goal": np.array([5.0, 5.6], np.float32)}}
     policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=0.5)
     policy.predict(both)
     policy.predict({**both, "agent_1": {**both["agent_1"], "observation": stands}})
