@@ -267,6 +267,10 @@ class BufferPlanner:
         max_edges: keep at most this many edges out of each buffer node towards other buffer nodes
             (its shortest ones; ``None``: every edge under the cut-offs). Fewer long edges, fewer
             edges a critic can misjudge (see also :meth:`sparsified`).
+        cost_guard: where ``c_max`` leaves an agent only a detour the critic predicts more than this
+            many times as costly as its shortest route without the cut-off, that route is admitted
+            too (:func:`~agents.search.graph.admit_cheaper_routes`): no agent is sent the long way
+            round to a far higher cost (``None``: off).
     """
 
     def __init__(
@@ -293,6 +297,7 @@ class BufferPlanner:
         fallback_suboptimality: Optional[float] = 2.0,
         budget_labels: int = 2_000,
         max_edges: Optional[int] = None,
+        cost_guard: Optional[float] = 2.0,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -347,6 +352,9 @@ class BufferPlanner:
         if max_edges is not None and int(max_edges) < 1:
             raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
         self.max_edges = None if max_edges is None else int(max_edges)
+        if cost_guard is not None and not cost_guard >= 1.0:
+            raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
+        self.cost_guard = None if cost_guard is None else float(cost_guard)
         self._buffer_graph: Optional[WaypointGraph] = None
 
     @property
@@ -377,7 +385,7 @@ class BufferPlanner:
             stepper_expansions_per_agent=self.stepper_expansions_per_agent,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
-            max_edges=self.max_edges)
+            max_edges=self.max_edges, cost_guard=self.cost_guard)
 
     def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
         """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
@@ -416,7 +424,8 @@ class BufferPlanner:
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
-                                   max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0)
+                                   max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
+                                   cost_guard=self.cost_guard)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,

@@ -253,3 +253,73 @@ def test_planner_budget_is_counted_in_expansions():
         make_planner(pts, euclid_pairwise(), stepper_expansions_per_agent=0)
     with pytest.raises(ValueError, match="repair_seed"):
         make_planner(pts, euclid_pairwise(), repair_seed=1.5)
+
+
+def band_pairwise(band=(2.6, 3.4), gap_y=5.5, base=0.5, extra=3.0):
+    """Cost ``base`` per unit everywhere, ``extra`` more per unit inside a vertical band that is open
+    only above ``gap_y``: a short crossing of it costs more than ``c_max``, the way round is long."""
+
+    def pairwise(a, b):
+        a = np.asarray(a, float)[:, None, :]
+        b = np.asarray(b, float)[None, :, :]
+        length = np.linalg.norm(b - a, axis=-1)
+        s = np.linspace(0, 1, 11)[:, None, None, None]
+        pts = a[None] + s * (b - a)[None]
+        inside = (pts[..., 0] > band[0]) & (pts[..., 0] < band[1]) & (pts[..., 1] < gap_y)
+        return np.maximum(length, 1.0), (base + extra * inside.mean(axis=0)) * length
+
+    return pairwise
+
+
+def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher_predicted_cost():
+    gx, gy = np.meshgrid(np.arange(7.0), np.arange(13.0))
+    pts, pw = np.stack([gx.ravel(), gy.ravel()], axis=1), band_pairwise(gap_y=11.5)
+    start, goal = np.array([[0.0, 0.0]]), np.array([[6.0, 0.0]])
+    plain = make_planner(pts, pw, d_max=1.6).plan(start, goal)
+    unguarded = make_planner(pts, pw, d_max=1.6, c_max=1.0, cost_guard=None).plan(start, goal)
+    guarded = make_planner(pts, pw, d_max=1.6, c_max=1.0).plan(start, goal)
+    # the cut-off alone leaves only the way over the top of the band: over twice as costly
+    assert unguarded.solved and unguarded.predicted_cost[0] > 2.0 * plain.predicted_cost[0]
+    assert unguarded.waypoint_observations(0)[:, 1].max() >= 12.0
+    # guarded, the straight route is admitted: no costlier than the plain search's
+    assert guarded.solved and guarded.predicted_cost[0] <= plain.predicted_cost[0] + 1e-9
+    assert guarded.waypoint_observations(0)[:, 1].max() < 2.0
+    # a detour within the factor is kept (a shorter band: 1.4 times the plain route's cost)
+    short_way_round = band_pairwise(gap_y=5.5)
+    a = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0).plan(start, goal)
+    b = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0, cost_guard=None).plan(start, goal)
+    assert a.nodes == b.nodes and a.waypoint_observations(0)[:, 1].max() >= 6.0
+    # and a factor of 1 admits it
+    c = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0, cost_guard=1.0).plan(start, goal)
+    assert c.waypoint_observations(0)[:, 1].max() < 2.0
+    with pytest.raises(ValueError, match="cost_guard"):
+        make_planner(pts, pw, cost_guard=0.5)
+
+
+def test_admit_cheaper_routes_on_a_hand_made_graph():
+    from agents.search.graph import admit_cheaper_routes, shortest_routes
+
+    # buffer nodes 0, 1; start 2, goal 3. The cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3 by 3 hops);
+    # the plain shortest route 2 -> 3 costs 2 by one hop
+    D = np.full((4, 4), 1.0)
+    C = np.full((4, 4), 1.0)
+    C[2, 3] = 2.0
+    keep = np.zeros((4, 4), dtype=bool)
+    keep[2, 0] = keep[0, 1] = keep[1, 3] = True
+    assert shortest_routes(keep, D, np.array([2]), np.array([3])) == [[2, 0, 1, 3]]
+    assert shortest_routes(keep, D, np.array([3]), np.array([2])) == [None]
+    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0).any()  # 3 is within twice 2
+    admitted = admit_cheaper_routes(keep, D, C, 2, d_max=5.0, factor=1.0)
+    assert admitted.tolist() == [True] and keep[2, 3]
+    # the direct hop costing more than the detour is not admitted
+    keep2 = np.zeros((4, 4), dtype=bool)
+    keep2[2, 0] = keep2[0, 1] = keep2[1, 3] = True
+    C[2, 3] = 5.0
+    assert admit_cheaper_routes(keep2, D, C, 2, d_max=5.0, factor=1.0).tolist() == [False] and not keep2[2, 3]
+    # an excluded edge is never admitted: the plain route is then 2 -> 1 -> 3 (cost 2)
+    C[2, 3] = 2.0
+    keep3 = np.zeros((4, 4), dtype=bool)
+    keep3[2, 0] = keep3[0, 1] = keep3[1, 3] = True
+    admitted = admit_cheaper_routes(keep3, D, C, 2, d_max=5.0, exclude_edges=np.array([[2, 3]]), factor=1.0)
+    assert admitted.tolist() == [True]
+    assert keep3[2, 1] and not keep3[2, 3]
