@@ -497,7 +497,7 @@ def shortest_routes(keep: np.ndarray, D: np.ndarray, sources: np.ndarray,
 
 def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
                          exclude: Optional[np.ndarray] = None, exclude_edges: Optional[np.ndarray] = None,
-                         factor: float = 2.0) -> np.ndarray:
+                         factor: float = 2.0, corroboration: float = 2.0) -> np.ndarray:
     """Admit (edit ``keep``) each agent's shortest route over every admissible edge where the cost
     cut-off made its shortest route more than ``factor`` times as costly by the critic.
 
@@ -506,21 +506,33 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
     several times that of the plain shortest route (a traced Apartment0 plan: 16 hops, predicted
     35, against one hop, predicted 11, and 31 against 6 when driven). A small excess is worth
     paying: the cut-off also keeps out edges the critic misjudges (a hop through a wall reads
-    costly), and short hops are driven more reliably. Returns which agents got their plain
+    costly), and short hops are driven more reliably. And the plain route is admitted only where
+    every edge ``u -> v`` of it is corroborated: a chain of hops shorter than ``d_max / 2`` leads
+    from ``u`` to ``v`` within ``corroboration`` times ``D[u, v]``. A wormhole (two panoramas
+    alike, far apart: a traced Apartment2 hop predicted at 4 steps, 58 m long) has no such
+    chain, while a real shortcut across a room does. Returns which agents got their plain
     shortest route admitted.
     """
     n = n_buffer
     k = (D.shape[0] - n) // 2
     s_ids, g_ids = np.arange(n, n + k), np.arange(n + k, n + 2 * k)
     admitted = np.zeros(k, dtype=bool)
-    plain = shortest_routes(_admissible(D, n, d_max, exclude, exclude_edges), D, s_ids, g_ids)
+    admissible = _admissible(D, n, d_max, exclude, exclude_edges)
+    plain = shortest_routes(admissible, D, s_ids, g_ids)
     pruned = shortest_routes(keep, D, s_ids, g_ids)
+    hops = None
 
     def cost(route: List[int]) -> float:
         return float(C[route[:-1], route[1:]].sum())
 
     for i, (p, q) in enumerate(zip(plain, pruned)):
-        if p is not None and q is not None and cost(q) > factor * cost(p):
+        if p is None or q is None or cost(q) <= factor * cost(p):
+            continue
+        if hops is None:
+            rows, cols = np.nonzero(admissible & (D < d_max / 2))
+            hops = sparse.csr_matrix((np.maximum(D[rows, cols], _MIN_DISTANCE), (rows, cols)), shape=D.shape)
+        chain = dijkstra(hops, directed=True, indices=p[:-1])[np.arange(len(p) - 1), p[1:]]
+        if np.all(chain <= corroboration * D[p[:-1], p[1:]]):
             keep[p[:-1], p[1:]] = True
             admitted[i] = True
     return admitted

@@ -275,9 +275,9 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
     gx, gy = np.meshgrid(np.arange(7.0), np.arange(13.0))
     pts, pw = np.stack([gx.ravel(), gy.ravel()], axis=1), band_pairwise(gap_y=11.5)
     start, goal = np.array([[0.0, 0.0]]), np.array([[6.0, 0.0]])
-    plain = make_planner(pts, pw, d_max=1.6).plan(start, goal)
-    unguarded = make_planner(pts, pw, d_max=1.6, c_max=1.0, cost_guard=None).plan(start, goal)
-    guarded = make_planner(pts, pw, d_max=1.6, c_max=1.0).plan(start, goal)
+    plain = make_planner(pts, pw, d_max=2.5).plan(start, goal)
+    unguarded = make_planner(pts, pw, d_max=2.5, c_max=1.0, cost_guard=None).plan(start, goal)
+    guarded = make_planner(pts, pw, d_max=2.5, c_max=1.0).plan(start, goal)
     # the cut-off alone leaves only the way over the top of the band: over twice as costly
     assert unguarded.solved and unguarded.predicted_cost[0] > 2.0 * plain.predicted_cost[0]
     assert unguarded.waypoint_observations(0)[:, 1].max() >= 12.0
@@ -286,11 +286,11 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
     assert guarded.waypoint_observations(0)[:, 1].max() < 2.0
     # a detour within the factor is kept (a shorter band: 1.4 times the plain route's cost)
     short_way_round = band_pairwise(gap_y=5.5)
-    a = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0).plan(start, goal)
-    b = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0, cost_guard=None).plan(start, goal)
+    a = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0).plan(start, goal)
+    b = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0, cost_guard=None).plan(start, goal)
     assert a.nodes == b.nodes and a.waypoint_observations(0)[:, 1].max() >= 6.0
     # and a factor of 1 admits it
-    c = make_planner(pts, short_way_round, d_max=1.6, c_max=1.0, cost_guard=1.0).plan(start, goal)
+    c = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0, cost_guard=1.0).plan(start, goal)
     assert c.waypoint_observations(0)[:, 1].max() < 2.0
     with pytest.raises(ValueError, match="cost_guard"):
         make_planner(pts, pw, cost_guard=0.5)
@@ -323,3 +323,25 @@ def test_admit_cheaper_routes_on_a_hand_made_graph():
     admitted = admit_cheaper_routes(keep3, D, C, 2, d_max=5.0, exclude_edges=np.array([[2, 3]]), factor=1.0)
     assert admitted.tolist() == [True]
     assert keep3[2, 1] and not keep3[2, 3]
+
+
+def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
+    from agents.search.graph import admit_cheaper_routes
+
+    # start 2, goal 3; the cut-off keeps 2 -> 0 -> 1 -> 3 (hops of 2 steps, cost 3); the direct hop
+    # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps)
+    def graph(direct):
+        D = np.full((4, 4), 4.9)
+        D[2, 0] = D[0, 1] = D[1, 3] = 2.0
+        D[2, 3] = direct
+        C = np.full((4, 4), 1.0)
+        keep = np.zeros((4, 4), dtype=bool)
+        keep[2, 0] = keep[0, 1] = keep[1, 3] = True
+        return keep, D, C
+
+    keep, D, C = graph(direct=2.6)  # 6 steps of chain for a hop of 2.6: a wormhole
+    assert not admit_cheaper_routes(keep, D, C, 2, d_max=5.0).any() and not keep[2, 3]
+    keep, D, C = graph(direct=3.5)  # within twice the hop: a real shortcut
+    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
+    keep, D, C = graph(direct=2.6)
+    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0, corroboration=3.0).tolist() == [True]
