@@ -269,7 +269,7 @@ class BufferPlanner:
             edges a critic can misjudge (see also :meth:`sparsified`).
         cost_guard: where ``c_max`` leaves an agent only a detour the critic predicts more than this
             many times as costly as its shortest route without the cut-off, that route is admitted
-            too (:func:`~agents.search.graph.admit_cheaper_routes`): no agent is sent the long way
+            too (:func:`~agents.search.pruning.admit_cheaper_routes`): no agent is sent the long way
             round to a far higher cost (``None``: off).
     """
 

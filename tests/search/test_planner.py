@@ -297,7 +297,7 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
 
 
 def test_admit_cheaper_routes_on_a_hand_made_graph():
-    from agents.search.graph import admit_cheaper_routes, shortest_routes
+    from agents.search.pruning import admit_cheaper_routes, shortest_routes
 
     # buffer nodes 0, 1; start 2, goal 3. The cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3 by 3 hops);
     # the plain shortest route 2 -> 3 costs 2 by one hop
@@ -326,7 +326,7 @@ def test_admit_cheaper_routes_on_a_hand_made_graph():
 
 
 def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
-    from agents.search.graph import admit_cheaper_routes
+    from agents.search.pruning import admit_cheaper_routes
 
     # start 2, goal 3; the cut-off keeps 2 -> 0 -> 1 -> 3 (hops of 2 steps, cost 3); the direct hop
     # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps)
