@@ -21,7 +21,7 @@ from typing import Callable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 from scipy import sparse
 
-from .pruning import admit_cheaper_routes, relax_cost_locally
+from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, relax_cost_locally
 from .sparsify import cap_out_edges
 
 #: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
@@ -71,8 +71,8 @@ class NodePairwise:
                                    chunk_size=8192, within=d_max)
 
 
-#: sparse storage drops zeros, so kept edges carry at least these weights
-_MIN_DISTANCE = 1e-9
+#: sparse storage drops zeros, so kept edges carry at least this cost (their distances: pruning's
+#: ``_MIN_DISTANCE``)
 _MIN_COST = 1e-12
 
 
@@ -509,9 +509,11 @@ def build_problem_graph(
         ee = np.concatenate([ee, np.argwhere(passing & (D2 < d_max))])
     if max_edges is not None:
         cap_out_edges(keep, D2, max_edges, n)
-    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee)
+    allowed = admissible(D2, n, d_max, ex, ee)
+    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee,
+                                    allowed=allowed)
     if cost_guard is not None and math.isfinite(c_max):
-        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard)
+        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, allowed=allowed)
     graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 

@@ -41,6 +41,15 @@ def admissible(D: np.ndarray, n_buffer: int, d_max: float, exclude: Optional[np.
     return short
 
 
+def route_from_predecessors(pred: np.ndarray, source: int, target: int) -> List[int]:
+    """The nodes from ``source`` to ``target`` along a shortest-path tree (``pred``: Dijkstra's
+    predecessors from ``source``; ``target`` must be reachable)."""
+    nodes = [int(target)]
+    while nodes[-1] != source:
+        nodes.append(int(pred[nodes[-1]]))
+    return nodes[::-1]
+
+
 def shortest_routes(keep: np.ndarray, D: np.ndarray, sources: np.ndarray,
                     targets: np.ndarray) -> List[Optional[List[int]]]:
     """The shortest route (by ``D``, over the edges where ``keep`` is true) from each of ``sources`` to
@@ -53,16 +62,14 @@ def shortest_routes(keep: np.ndarray, D: np.ndarray, sources: np.ndarray,
         if not np.isfinite(dist[i, t]):
             out.append(None)
             continue
-        route = [int(t)]
-        while route[-1] != sources[i]:
-            route.append(int(pred[i, route[-1]]))
-        out.append(route[::-1])
+        out.append(route_from_predecessors(pred[i], int(sources[i]), int(t)))
     return out
 
 
 def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
                          exclude: Optional[np.ndarray] = None, exclude_edges: Optional[np.ndarray] = None,
-                         factor: float = 2.0, corroboration: float = 2.0) -> np.ndarray:
+                         factor: float = 2.0, corroboration: float = 2.0,
+                         allowed: Optional[np.ndarray] = None) -> np.ndarray:
     """Admit (edit ``keep``) each agent's shortest route over every admissible edge where the cost
     cut-off made its shortest route more than ``factor`` times as costly by the critic.
 
@@ -76,13 +83,15 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
     from ``u`` to ``v`` within ``corroboration`` times ``D[u, v]``. A wormhole (two panoramas
     alike, far apart: a traced Apartment2 hop predicted at 4 steps, 58 m long) has no such
     chain, while a real shortcut across a room does. Returns which agents got their plain
-    shortest route admitted.
+    shortest route admitted. ``allowed``: :func:`admissible` of the same arguments, where the
+    caller has it already.
     """
     n = n_buffer
     k = (D.shape[0] - n) // 2
     s_ids, g_ids = np.arange(n, n + k), np.arange(n + k, n + 2 * k)
     admitted = np.zeros(k, dtype=bool)
-    allowed = admissible(D, n, d_max, exclude, exclude_edges)
+    if allowed is None:
+        allowed = admissible(D, n, d_max, exclude, exclude_edges)
     plain = shortest_routes(allowed, D, s_ids, g_ids)
     pruned = shortest_routes(keep, D, s_ids, g_ids)
     hops = None
@@ -105,7 +114,8 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
 
 def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
                        c_max: float, exclude: Optional[np.ndarray] = None,
-                       relax: bool = True, exclude_edges: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
+                       relax: bool = True, exclude_edges: Optional[np.ndarray] = None,
+                       allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
     """Relax the cost cut-off around agents without a path until every goal is reachable (edits ``keep``).
 
     For an agent without a path, the edges leaving the region its start reaches (and the edges
@@ -113,14 +123,15 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
     times, ...; the rest of the graph keeps ``c_max``. ``exclude`` lists buffer nodes that
     never gain an edge, ``exclude_edges`` (``(E, 2)`` node pairs) edges never admitted.
     Returns ``(connected, c)``: which agents have a path, and the largest cut-off used
-    (``c_max`` itself when nothing was relaxed, or when ``relax`` is false).
+    (``c_max`` itself when nothing was relaxed, or when ``relax`` is false). ``allowed``:
+    :func:`admissible` of the same arguments, where the caller has it already.
     """
     n = n_buffer
     k = (D.shape[0] - n) // 2
     s_ids = np.arange(n, n + k)
     g_ids = np.arange(n + k, n + 2 * k)
     c = float(c_max)
-    short = admissible(D, n_buffer, d_max, exclude, exclude_edges)
+    short = admissible(D, n_buffer, d_max, exclude, exclude_edges) if allowed is None else allowed
     c_top = float(C[short].max()) if short.any() else 0.0
     while True:
         g = sparse.csr_matrix(keep)
@@ -135,4 +146,4 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
             keep[short & (C < c) & bwd[i][None, :]] = True
 
 
-__all__ = ["admissible", "admit_cheaper_routes", "relax_cost_locally", "shortest_routes"]
+__all__ = ["admissible", "admit_cheaper_routes", "relax_cost_locally", "route_from_predecessors", "shortest_routes"]
