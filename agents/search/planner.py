@@ -52,6 +52,7 @@ from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
 from .mapf.pibt import solve_pibt
 from .mapf.prioritized import solve_prioritized
+from .pruning import route_from_predecessors
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
 
@@ -522,10 +523,7 @@ class BufferPlanner:
         dist, pred = dijkstra(durations, directed=True, indices=s, return_predecessors=True)
         if not np.isfinite(dist[g]):
             return CBSResult("infeasible", message="no path from start to goal")
-        nodes = [g]
-        while nodes[-1] != s:
-            nodes.append(int(pred[nodes[-1]]))
-        nodes.reverse()
+        nodes = route_from_predecessors(pred, s, g)
         path = [(int(v), int(round(dist[v]))) for v in nodes]
         t = int(round(dist[g]))
         return CBSResult("optimal", paths=[path], soc=t, makespan=t, lower_bound=t,

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from .graph import WaypointGraph
+from .pruning import route_from_predecessors
 
 
 @dataclass
@@ -81,10 +82,7 @@ def shortest_path(
     dist, pred = dijkstra(w, directed=True, indices=source, return_predecessors=True)
     if not np.isfinite(dist[target]):
         return Plan([], np.inf, np.inf, "infeasible")
-    nodes = [target]
-    while nodes[-1] != source:
-        nodes.append(int(pred[nodes[-1]]))
-    nodes.reverse()
+    nodes = route_from_predecessors(pred, source, target)
     d, c = _path_totals(graph, nodes)
     return Plan(nodes, d, c, "optimal", {"objective": objective})
 
