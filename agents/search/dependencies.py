@@ -26,6 +26,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import breadth_first_order
 
+from .repair import near_either_way
+
 #: per agent: target index -> the (agent, target index) pairs that must be reached first
 Dependencies = List[Dict[int, List[Tuple[int, int]]]]
 
@@ -220,8 +222,7 @@ def shut_out(problem: Any, goal: int, others: Mapping[str, Tuple[Sequence[int], 
 
 def nodes_near(problem: Any, node: int, radius: float) -> np.ndarray:
     """Mask of the buffer nodes of ``problem`` within ``radius`` predicted steps of ``node``, either way."""
-    n = problem.n_buffer
-    return np.minimum(problem.D[node, :n], problem.D[:n, node]) < radius
+    return near_either_way(problem.D, node, radius, problem.n_buffer)
 
 
 def cut_off(adjacency: Any, source: int, target: int, banned: np.ndarray) -> bool:

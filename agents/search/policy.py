@@ -48,7 +48,7 @@ from .models import (
     policy_fn,
 )
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
-from .repair import EdgeMemory, edges_near, past_failed_waypoints
+from .repair import EdgeMemory, edges_near, near_either_way, past_failed_waypoints
 
 
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
@@ -551,7 +551,7 @@ class SearchPolicy:
         # nodes right by it
         f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
         if f < n_nodes:
-            near = np.minimum(p.D[f], p.D[:, f]) < self.ban_radius
+            near = near_either_way(p.D, f, self.ban_radius)
             self._failed[agent].append(f)
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
         edges = self._exclude_edges(agent)

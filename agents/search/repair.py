@@ -166,6 +166,13 @@ def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed
     return keep
 
 
+def near_either_way(D: np.ndarray, node: int, radius: float, n: Union[int, None] = None) -> np.ndarray:
+    """Mask of the first ``n`` nodes (all without it) within ``radius`` predicted steps of ``node``
+    in ``D``, either way (the critic's distance is not symmetric)."""
+    n = D.shape[0] if n is None else n
+    return np.minimum(D[node, :n], D[:n, node]) < radius
+
+
 def edges_near(D: np.ndarray, u: int, v: int, radius: float) -> np.ndarray:
     """``(E, 2)`` node pairs: the edge ``u -> v`` and every edge from a node within ``radius``
     predicted steps of ``u`` to one within ``radius`` of ``v``.
@@ -174,10 +181,10 @@ def edges_near(D: np.ndarray, u: int, v: int, radius: float) -> np.ndarray:
     wormhole: two panoramas alike) finds the same shortcut again between the nodes right by them;
     its replans leave them all out.
     """
-    a = np.union1d(np.flatnonzero(np.minimum(D[u], D[:, u]) < radius), [u])
-    b = np.union1d(np.flatnonzero(np.minimum(D[v], D[:, v]) < radius), [v])
+    a = np.union1d(np.flatnonzero(near_either_way(D, u, radius)), [u])
+    b = np.union1d(np.flatnonzero(near_either_way(D, v, radius)), [v])
     pairs = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
     return pairs[pairs[:, 0] != pairs[:, 1]]
 
 
-__all__ = ["Edge", "EdgeMemory", "edges_near", "past_failed_waypoints"]
+__all__ = ["Edge", "EdgeMemory", "edges_near", "near_either_way", "past_failed_waypoints"]
