@@ -20,9 +20,20 @@ current waypoint's observation. Rules, all from observations only:
   one that parks in a doorway before another has gone through shuts that one out for good);
   same patience as the plan order. Where the two orders meet (the plan sends the parking agent
   first, the goal order holds it for the other), the other agent goes first;
+- **clear goal** (optional): an agent on its way to its goal and within ``2 * goal_clearance``
+  predicted steps of it stands still while another live agent is within ``goal_clearance`` of
+  its goal (the routes may say that one has passed, but it still stands there): parked, it
+  would shut that one in. It waits only on an agent free to leave (not one held for a third
+  agent, its departure time, or to clear its own goal) and whose goal it does not stand nearer
+  (then it moves on to clear that goal), for at most ``order_patience`` steps. It begins to
+  hold only while the two are further apart than ``safety_radius`` (closer, the yield rule
+  settles which goes first: held in the other's way, it would be pushed along);
+  an agent it holds this way no longer waits for it by the plan's order or the goal order;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
-  first, ties broken by index); the paper states this rule, we implement it. Only two agents
+  first, ties broken by index; with ``goal_clearance``, where one of them stands within it of
+  the goal the other is on its way to, the one nearer the other's goal goes first); the paper
+  states this rule, we implement it. Only two agents
   that would both move yield to each other: one that already stands still (at its waypoint,
   waiting for its departure time or for an agent the plan sends first) is passed. Otherwise an
   agent that waits for a neighbour to go first can have priority over it, the neighbour yields
@@ -53,6 +64,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
+
+from .clearance import GoalClearance
 
 PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 PairFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -99,13 +112,14 @@ class ControllerStats:
     stalls: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
     #: per agent, why it stood still on the last step: ``"wait"`` (its plan's departure time),
-    #: ``"yield:<agent>"`` (another agent with priority was too close) or ``None`` (it moved)
+    #: ``"yield:<agent>"`` (another agent with priority was too close), ``"wait:<agent>"`` (the plan
+    #: sends that one first), ``"clear:<agent>"`` (that one stands by its goal) or ``None`` (it moved)
     holding: Dict[str, Optional[str]] = field(default_factory=dict)
     #: per agent, times it was found stuck on the way to its current target
     leg_escapes: Dict[str, int] = field(default_factory=dict)
 
 
-class WaypointController:
+class WaypointController(GoalClearance):
     """Turns per-agent plans into actions, one environment step at a time.
 
     Args:
@@ -150,6 +164,10 @@ class WaypointController:
             next (a policy that pushes into an obstacle it does not see as one, such as another
             agent parked on its way, moves out of line with it; a random walk of a few steps
             hardly moves it); a random direction where the policy's action is about zero.
+        sidestep_after: with ``escape="random"``, an agent found stuck more than this many times
+            in the episode sidesteps from then on (``None``: never): agents stuck now and then
+            keep their random escapes, one pressed against furniture again and again gets out
+            of line with it.
         skip_after: times an agent may be stuck on the way to one target before it replans
             (or, without ``replan``, heads for the next waypoint).
         seed: seed of the escape actions.
@@ -165,6 +183,7 @@ class WaypointController:
             goal. Asked afresh at every step (routes change when agents replan); an agent waits
             on another for at most ``order_patience`` steps in which that one makes no progress.
             An agent it holds this way no longer waits for it by the plan's order.
+        goal_clearance: see *clear goal* above (predicted steps; ``None``: off).
     """
 
     def __init__(
@@ -190,6 +209,8 @@ class WaypointController:
         order_patience: int = 40,
         progress_patience: Optional[int] = None,
         goal_order: Optional[Callable[[str], List[Tuple[str, int]]]] = None,
+        goal_clearance: Optional[float] = None,
+        sidestep_after: Optional[int] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -216,6 +237,11 @@ class WaypointController:
         if escape not in ("random", "sidestep"):
             raise ValueError(f"escape must be 'random' or 'sidestep', got {escape!r}")
         self.escape = escape
+        if sidestep_after is not None and sidestep_after < 0:
+            raise ValueError(f"sidestep_after must be >= 0 or None, got {sidestep_after!r}")
+        self.sidestep_after = sidestep_after
+        #: per agent: times it was found stuck in the episode
+        self._stuck_total = {a: 0 for a in self.plans}
         #: per agent: the action of its escape under way (sidestep), and the side of its last one
         self._escape_action: Dict[str, np.ndarray] = {}
         self._side = {a: 1.0 for a in self.plans}
@@ -243,6 +269,16 @@ class WaypointController:
         self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
         #: agent -> the agent it holds its parking for (goal order), as of its last check
         self._parks_after: Dict[str, str] = {}
+        if goal_clearance is not None and not goal_clearance > 0:
+            raise ValueError(f"goal_clearance must be > 0 or None, got {goal_clearance!r}")
+        self.goal_clearance = goal_clearance
+        #: agent -> the agent it stands still for to clear its goal (as of the last step); per pair,
+        #: the step it began; per agent, those it no longer waits on (its patience ran out)
+        self._clearing: Dict[str, str] = {}
+        self._clear_since: Dict[Tuple[str, str], int] = {}
+        self._clear_gave_up: Dict[str, set] = {a: set() for a in self.plans}
+        #: close pairs whose yield priority the goal rule decided, and the agent that goes first
+        self._goal_priority: Dict[Tuple[str, str], str] = {}
         self._live: set = set(self.plans)
         self.t = 0
         self.stats = ControllerStats()
@@ -300,7 +336,7 @@ class WaypointController:
                 deps.remove((b, r))  # reached (or arrived): satisfied for good
                 continue
             # b holds its parking until this agent has passed its goal: this one goes first
-            if self._patience_over(agent, q, b) or self._parks_after.get(b) == agent:
+            if self._patience_over(agent, q, b) or agent in (self._parks_after.get(b), self._clearing.get(b)):
                 deps.remove((b, r))
                 continue
             return b
@@ -308,6 +344,8 @@ class WaypointController:
             return None
         for b, r in self.goal_order(agent):
             if b == agent or b not in self._live or self.index.get(b, 0) > r or b in self._gave_up[agent]:
+                continue
+            if self._clearing.get(b) == agent:  # b will not park while this one stands by b's goal
                 continue
             if self._patience_over(agent, q, b):
                 self._gave_up[agent].add(b)
@@ -392,6 +430,8 @@ class WaypointController:
                 hold[i] = True
                 reason[i] = f"wait:{waiting[a]}"
                 self.stats.waits += 1
+        if self.goal_clearance is not None and len(live) > 1:
+            self._clear_goals(live, obs, hold, reason, to_target)
         if self.safety_radius is not None and len(live) > 1:
             yielders = self._yield_mask(live, obs, ~hold)
             for i, w in yielders.items():
@@ -485,6 +525,7 @@ class WaypointController:
             self.stats.escapes += 1
             self.stats.leg_escapes[a] = self.stats.leg_escapes.get(a, 0) + 1
             self._stuck_count[a] += 1
+            self._stuck_total[a] = self._stuck_total.get(a, 0) + 1
             # escapes grow with each consecutive one on the way to the same target (up to 8x)
             self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
             k = self.index[a]
@@ -501,13 +542,19 @@ class WaypointController:
                     self.stats.leg_escapes[a] = 0
                     self.stats.skips += 1
             self._escape_action.pop(a, None)
-            if self.escape == "sidestep":
+            if self._sidesteps(a):
                 self._side[a] = -self._side[a]
             actions[i] = self._escape_step(a, actions[i])
 
+    def _sidesteps(self, agent: str) -> bool:
+        """Whether ``agent``'s escapes are sidesteps (see ``escape`` and ``sidestep_after``)."""
+        if self.escape == "sidestep":
+            return True
+        return self.sidestep_after is not None and self._stuck_total.get(agent, 0) > self.sidestep_after
+
     def _escape_step(self, agent: str, action: np.ndarray) -> np.ndarray:
         """The escape action of ``agent`` now, given the action its policy would take (see ``escape``)."""
-        if self.escape == "random":
+        if not self._sidesteps(agent):
             return self.rng.uniform(-1.0, 1.0, size=action.shape)
         step = self._escape_action.get(agent)
         if step is None:
@@ -524,6 +571,7 @@ class WaypointController:
     def _yield_mask(self, live: List[str], obs: np.ndarray, moving: np.ndarray) -> Dict[int, int]:
         """The agents (indices into ``live``) that yield on this step, each to the agent it yields to;
         only pairs of agents that would both move (``moving``) yield."""
+        before, self._goal_priority = self._goal_priority, {}
         ii, jj = np.triu_indices(len(live), 1)
         both = moving[ii] & moving[jj]
         ii, jj = ii[both], jj[both]
@@ -540,6 +588,8 @@ class WaypointController:
         lag = np.array([self._lag(a) for a in live])
         # the agent further behind its plan has priority; ties go to the lower index
         i_first = (lag[ii] > lag[jj]) | ((lag[ii] == lag[jj]) & (ii < jj))
+        if self.goal_clearance is not None:
+            i_first = self._goal_first(live, obs, ii, jj, close, i_first, before)
         loser = np.where(i_first, jj, ii)[close]
         winner = np.where(i_first, ii, jj)[close]
         hold: Dict[int, int] = {}

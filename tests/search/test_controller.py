@@ -330,14 +330,15 @@ def test_with_skip_after_one_a_stuck_leg_goes_to_the_fallback_at_once_and_then_t
     assert (escapes1, escapes2) == (2, 4) and t1 < t2  # the new plan comes after half the escapes, sooner
 
 
-def push_past_a_parked_agent(escape, seed):
+def push_past_a_parked_agent(escape, seed, sidestep_after=None):
     """agent_0 drives straight at its goal through agent_1, parked at its own goal on the way;
     returns (steps to arrive or None, escapes, agent_0's trail)."""
     env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=2)
     obs, infos = env.reset(options={"starts": [(5.0, 5.0), (15.0, 5.0)], "goals": [(30.0, 5.0), (15.0, 5.0)]})
     goal = np.array([30, 5], np.float32) / SIZE
     ctrl = WaypointController(straight_policy, euclid_steps, {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), goal)},
-                              reach_threshold=1.0, safety_radius=None, escape=escape, seed=seed, skip_after=100)
+                              reach_threshold=1.0, safety_radius=None, escape=escape, seed=seed, skip_after=100,
+                              sidestep_after=sidestep_after)
     trail = [infos["agent_0"]["position"]]
     while "agent_0" in env.agents and ctrl.t < 200:
         actions = ctrl.act({"agent_0": obs["agent_0"]["observation"]})
@@ -363,6 +364,19 @@ def test_a_sidestep_takes_an_agent_past_a_parked_agent_on_its_line():
     assert max(random_escapes) >= 2
 
 
+def test_sidestep_after_turns_the_escapes_of_an_agent_stuck_again_and_again_into_sidesteps():
+    random_runs = [push_past_a_parked_agent("random", seed) for seed in range(5)]
+    for seed, (steps_r, escapes_r, trail_r) in enumerate(random_runs):
+        steps, escapes, trail = push_past_a_parked_agent("random", seed, sidestep_after=100)
+        assert (steps, escapes) == (steps_r, escapes_r) and np.array_equal(trail, trail_r)  # never reached
+        assert push_past_a_parked_agent("random", seed, sidestep_after=0)[1] == 1  # sidesteps from the first
+        steps, escapes, _ = push_past_a_parked_agent("random", seed, sidestep_after=1)
+        assert steps is not None and escapes <= 2  # one random escape, then a sidestep gets it past
+    assert max(r[1] for r in random_runs) >= 3  # random escapes alone take longer somewhere
+    with pytest.raises(ValueError, match="sidestep_after must be"):
+        WaypointController(straight_policy, euclid_steps, {}, sidestep_after=-1)
+
+
 def test_the_escape_kind_is_checked():
     with pytest.raises(ValueError, match="escape must be"):
         WaypointController(straight_policy, euclid_steps, {}, escape="spin")
@@ -381,3 +395,103 @@ def test_sidesteps_alternate_sides():
     along = moved[np.abs(moved[:, 0]) > 0.9, 0]  # the escape steps, along the wall
     assert ctrl.stats.escapes >= 2 and len(along) >= 3 + 6
     assert np.all(along[:3] == along[0]) and np.all(along[3:9] == -along[0])  # 3 one way, then 6 the other
+
+
+def clear_goal_run(goal_clearance, zigzags=8, depart=None, after=None, order_patience=40):
+    """agent_0 heads for its goal at (20, 5); agent_1 starts 2 units past it and zigzags beside that goal
+    (``zigzags`` legs of about 4 steps, within 2.5 units of it) before it drives on to (40, 5); with
+    ``depart`` it first waits at its start until that step. Returns the step at which each arrived, the
+    distance of agent_1 from agent_0's goal when agent_0 arrived, and the hold reasons seen."""
+    env = make_env([(5.0, 5.0), (22.0, 5.0)], [(20.0, 5.0), (40.0, 5.0)])
+    g0, g1 = np.array([20, 5], np.float32) / SIZE, np.array([40, 5], np.float32) / SIZE
+    wps = np.array([[22, 5]] + [[21.5, 7] if i % 2 == 0 else [21.5, 3] for i in range(zigzags)], np.float32) / SIZE
+    plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), g0),
+             "agent_1": AgentPlan(wps, g1, depart_times=None if depart is None else [depart] + [0] * zigzags,
+                                  starts_at_first=True, after=after)}
+    ctrl = WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=None,
+                              stuck_window=None, goal_clearance=goal_clearance, order_patience=order_patience)
+    obs, infos = env.reset(options=env._pinned)
+    arrived, gap, held = {}, None, set()
+    while env.agents and ctrl.t < 300:
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        held |= {v for v in ctrl.stats.holding.values() if v}
+        obs, _, term, _, infos = env.step(actions)
+        for a, done in term.items():
+            if done and a not in arrived:
+                arrived[a] = ctrl.t
+                if a == "agent_0" and "agent_1" in infos:
+                    gap = float(np.linalg.norm(infos["agent_1"]["position"] - [20.0, 5.0]))
+    return arrived, gap, held
+
+
+def test_an_agent_does_not_park_while_another_stands_by_its_goal():
+    arrived, gap, held = clear_goal_run(goal_clearance=None)
+    assert gap is not None and gap < 3.0  # it parks beside agent_1 (in a corridor it would shut it in)
+    arrived, gap, held = clear_goal_run(goal_clearance=3.0)
+    assert "clear:agent_1" in held and "agent_1" in arrived
+    assert gap is None or gap >= 3.0  # it waited until agent_1 had left
+
+
+def test_goal_clearance_gives_up_on_an_agent_that_does_not_leave():
+    arrived, gap, held = clear_goal_run(goal_clearance=3.0, zigzags=40, order_patience=15)
+    assert "clear:agent_1" in held and arrived["agent_0"] < 50 and gap < 3.0
+
+
+def test_an_agent_standing_nearer_the_others_goal_moves_on_instead_of_waiting():
+    """One step of the rule (no env): agent_0 is 4 units from its goal, agent_1 1 unit past that goal.
+    agent_0 holds for agent_1, unless it stands nearer agent_1's goal than agent_1 stands to its own
+    (then it moves on: it has to clear that goal anyway)."""
+    def hold_of_agent_0(goal1):
+        g0 = np.array([20, 5], np.float32) / SIZE
+        plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), g0),
+                 "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array(goal1, np.float32) / SIZE)}
+        ctrl = WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=None,
+                                  stuck_window=None, goal_clearance=3.0)
+        ctrl.act({"agent_0": np.array([16, 5], np.float32) / SIZE, "agent_1": np.array([21, 5], np.float32) / SIZE})
+        return ctrl.stats.holding["agent_0"]
+
+    assert hold_of_agent_0((40.0, 5.0)) == "clear:agent_1"
+    assert hold_of_agent_0((16.5, 5.5)) is None
+
+
+def test_goal_clearance_does_not_wait_on_an_agent_held_for_something_else():
+    """agent_1 waits for its departure time: waiting for it to leave would only wait with it."""
+    arrived, gap, held = clear_goal_run(goal_clearance=3.0, zigzags=0, depart=60)
+    assert "clear:agent_1" not in held and arrived["agent_0"] < 30
+
+
+def test_an_agent_the_plan_holds_for_the_parking_one_goes_first_when_that_one_clears_its_goal():
+    """agent_1's plan says: leave after agent_0 has arrived; agent_0 will not park while agent_1 stands
+    by its goal. agent_1 goes first instead of both waiting out their patience."""
+    arrived, gap, held = clear_goal_run(goal_clearance=3.0, zigzags=0, after={1: [("agent_0", 1)]},
+                                        order_patience=100)
+    assert {"clear:agent_1", "wait:agent_0"} <= held
+    assert gap >= 3.0 and arrived["agent_0"] < 40 and "agent_1" in arrived  # agent_1 had left: no patience spent
+
+
+def test_with_goal_clearance_the_agent_by_the_others_goal_goes_first_and_keeps_its_priority():
+    """Two close agents on their last legs, agent_1 half a unit from agent_0's goal: agent_0 yields
+    (without the rule agent_1 would, by index). Pushed about, the pair keeps that order while close."""
+    def controller(clearance):
+        plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), np.array([18, 5], np.float32) / SIZE),
+                 "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array([40, 5], np.float32) / SIZE)}
+        return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
+                                  stuck_window=None, goal_clearance=clearance)
+
+    def step(ctrl, p0, p1):
+        ctrl.act({"agent_0": np.array(p0, np.float32) / SIZE, "agent_1": np.array(p1, np.float32) / SIZE})
+        return ctrl.stats.holding
+
+    assert step(controller(None), (16, 5), (17.5, 5)) == {"agent_0": None, "agent_1": "yield:agent_0"}
+    ctrl = controller(3.0)
+    assert step(ctrl, (16, 5), (17.5, 5)) == {"agent_0": "yield:agent_1", "agent_1": None}
+    # agent_1 no longer stands by agent_0's goal; a new pair would go by index, this one keeps its order
+    assert step(controller(3.0), (16, 5), (14.5, 5))["agent_1"] == "yield:agent_0"
+    assert step(ctrl, (16, 5), (14.5, 5)) == {"agent_0": "yield:agent_1", "agent_1": None}
+    step(ctrl, (16, 5), (30, 5))  # apart: the pair is forgotten
+    assert step(ctrl, (16, 5), (14.5, 5))["agent_1"] == "yield:agent_0"
+
+
+def test_goal_clearance_is_checked():
+    with pytest.raises(ValueError, match="goal_clearance must be"):
+        WaypointController(straight_policy, euclid_steps, {}, goal_clearance=0.0)

@@ -1,0 +1,118 @@
+"""The *clear goal* rules of :class:`~agents.search.controller.WaypointController` (its
+``goal_clearance``): an agent about to park waits while another stands by its goal, and of two
+close agents the one standing by the other's goal goes first. A mixin: the controller keeps the
+state these methods read and write.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
+
+import numpy as np
+
+
+class GoalClearance:
+    """The controller's *clear goal* rules (see :class:`~agents.search.controller.WaypointController`)."""
+
+    goal_clearance: Optional[float]
+    safety_radius: Optional[float]
+    order_patience: int
+    t: int
+    index: Dict[str, int]
+    plans: Dict[str, Any]
+    distance: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    proximity: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]]
+    stats: Any
+    _clearing: Dict[str, str]
+    _clear_since: Dict[Tuple[str, str], int]
+    _clear_gave_up: Dict[str, Set[str]]
+
+    def _clear_goals(self, live: List[str], obs: np.ndarray, hold: np.ndarray, reason: List[Optional[str]],
+                     to_target: Dict[str, float]) -> None:
+        """Hold (``reason`` ``"clear:<agent>"``) the agents near their goal while another live agent
+        stands within ``goal_clearance`` of it (see *clear goal* in the module's docstring)."""
+        assert self.goal_clearance is not None  # checked by the caller
+        r = self.goal_clearance
+        before, self._clearing = self._clearing, {}
+        for i, a in enumerate(live):
+            if hold[i] or self.index[a] < len(self.plans[a].waypoints) or not to_target.get(a, math.inf) < 2 * r:
+                continue
+            # only agents free to leave (or waiting for this one to go first): one held for another
+            # reason would keep it waiting for nothing
+            others = [j for j, b in enumerate(live) if j != i and b not in self._clear_gave_up[a]
+                      and self._clearing.get(b) != a and before.get(b) != a and reason[j] in (None, f"wait:{a}")]
+            if not others:
+                continue
+            n = len(others)
+            # how far each other agent is from this one's goal, and this one from each other's goal
+            pairs_obs = np.concatenate([obs[others], np.repeat(obs[i:i + 1], n, axis=0)])
+            pairs_goal = np.stack([np.asarray(self.plans[a].goal)] * n + [np.asarray(self.plans[live[j]].goal)
+                                                                          for j in others])
+            both = np.asarray(self.distance(pairs_obs, pairs_goal), dtype=np.float64).reshape(2 * n)
+            d, mine = both[:n], both[n:]
+            for j in np.argsort(d):
+                if not d[j] < r:
+                    break
+                b = live[others[j]]
+                # it stands closer to that one's goal than that one to its own (it moves on to clear it),
+                # or they already touch (the yield rule settles which goes first); once it holds, it
+                # holds until that one has left
+                if before.get(a) != b and (mine[j] < d[j] or self._touching(obs[i], obs[others[j]])):
+                    continue
+                since = self._clear_since.setdefault((a, b), self.t)
+                if self.t - since >= self.order_patience:  # it does not leave: park after all
+                    self._clear_gave_up[a].add(b)
+                    continue
+                hold[i] = True
+                reason[i] = f"clear:{b}"
+                self._clearing[a] = b
+                self.stats.waits += 1
+                break
+
+    def _touching(self, x: np.ndarray, y: np.ndarray) -> bool:
+        """Whether two agents' observations are within ``safety_radius`` (under ``proximity``): the
+        yield rule settles which of them goes."""
+        if self.safety_radius is None:
+            return False
+        if self.proximity is not None:
+            p = float(np.asarray(self.proximity(x[None], y[None])).reshape(-1)[0])
+        else:
+            p = float(min(np.asarray(self.distance(x[None], y[None])).reshape(-1)[0],
+                          np.asarray(self.distance(y[None], x[None])).reshape(-1)[0]))
+        return p < self.safety_radius
+
+    def _goal_first(self, live: List[str], obs: np.ndarray, ii: np.ndarray, jj: np.ndarray, close: np.ndarray,
+                    i_first: np.ndarray, before: Dict[Tuple[str, str], str]) -> np.ndarray:
+        """The yield rule's priorities (``i_first`` per pair ``ii[k], jj[k]``) where one of two close
+        agents stands within ``goal_clearance`` of the goal the other is on its way to: the one
+        standing nearer the other's goal goes first (it has to clear it, or the other parks in front of
+        it). ``before``: the pairs so decided on the last step (they keep their order while close)."""
+        assert self.goal_clearance is not None  # checked by the caller
+        last = np.array([self.index[a] >= len(self.plans[a].waypoints) for a in live])
+        sel = np.flatnonzero(close & (last[ii] | last[jj]))
+        if len(sel) == 0:
+            return i_first
+        n = len(sel)
+        goals = np.stack([np.asarray(self.plans[a].goal) for a in live])
+        d = np.asarray(self.distance(np.concatenate([obs[ii[sel]], obs[jj[sel]]]),
+                                     np.concatenate([goals[jj[sel]], goals[ii[sel]]])), dtype=np.float64).reshape(2 * n)
+        by_j = np.where(last[jj[sel]], d[:n], np.inf)  # agent ii stands by jj's goal
+        by_i = np.where(last[ii[sel]], d[n:], np.inf)
+        decide = (np.minimum(by_j, by_i) < self.goal_clearance) & (by_j != by_i)
+        out = i_first.copy()
+        kept = {}
+        for k, q in enumerate(sel.tolist()):
+            pair = (live[ii[q]], live[jj[q]])
+            # decided once for a pair while it stays close: pushing each other, the two distances
+            # would hand the priority back and forth every step
+            first = before.get(pair)
+            if first is None and decide[k]:
+                first = pair[0] if by_j[k] < by_i[k] else pair[1]
+            if first is not None:
+                kept[pair] = first
+                out[q] = first == pair[0]
+        self._goal_priority = kept
+        return out
+
+
+__all__ = ["GoalClearance"]
