@@ -1,7 +1,18 @@
 """The *clear goal* rules of :class:`~agents.search.controller.WaypointController` (its
-``goal_clearance``): an agent about to park waits while another stands by its goal, and of two
-close agents the one standing by the other's goal goes first. A mixin: the controller keeps the
-state these methods read and write.
+``goal_clearance``, in predicted steps). A mixin: the controller keeps the state these methods
+read and write.
+
+- An agent on its way to its goal and within ``2 * goal_clearance`` of it stands still while
+  another live agent is within ``goal_clearance`` of that goal (the routes may say that one has
+  passed the goal, but it still stands there): parked, it would shut that one in. It waits only
+  on an agent free to leave (not one held for a third agent, its departure time, or to clear its
+  own goal) and whose goal it does not stand nearer itself (then it moves on to clear that goal),
+  for at most ``order_patience`` steps. It begins to hold only while the two are further apart
+  than ``safety_radius`` (closer, it would stand in the other's way and be pushed along). An agent
+  it holds this way no longer waits for it by the plan's order or the goal order.
+- Of two agents close enough to yield, where one stands within ``goal_clearance`` of the goal the
+  other is on its way to, the one nearer the other's goal goes first; the pair keeps that order
+  while close (two agents pushing each other would hand it back and forth).
 """
 from __future__ import annotations
 

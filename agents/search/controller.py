@@ -20,15 +20,9 @@ current waypoint's observation. Rules, all from observations only:
   one that parks in a doorway before another has gone through shuts that one out for good);
   same patience as the plan order. Where the two orders meet (the plan sends the parking agent
   first, the goal order holds it for the other), the other agent goes first;
-- **clear goal** (optional): an agent on its way to its goal and within ``2 * goal_clearance``
-  predicted steps of it stands still while another live agent is within ``goal_clearance`` of
-  its goal (the routes may say that one has passed, but it still stands there): parked, it
-  would shut that one in. It waits only on an agent free to leave (not one held for a third
-  agent, its departure time, or to clear its own goal) and whose goal it does not stand nearer
-  (then it moves on to clear that goal), for at most ``order_patience`` steps. It begins to
-  hold only while the two are further apart than ``safety_radius`` (closer, the yield rule
-  settles which goes first: held in the other's way, it would be pushed along);
-  an agent it holds this way no longer waits for it by the plan's order or the goal order;
+- **clear goal** (optional, ``goal_clearance``; :mod:`agents.search.clearance`): an agent near
+  its goal stands still while another agent free to leave stands by that goal (parked, it would
+  shut that one in); the one it holds for no longer waits for it by the plan's or goal order;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
   with the lower priority stands still (priority: the agent further behind its plan goes
   first, ties broken by index; with ``goal_clearance``, where one of them stands within it of
