@@ -7,9 +7,10 @@ read and write.
   passed the goal, but it still stands there): parked, it would shut that one in. It waits only
   on an agent free to leave (not one held for a third agent, its departure time, or to clear its
   own goal) and whose goal it does not stand nearer itself (then it moves on to clear that goal),
-  for at most ``order_patience`` steps. It begins to hold only while the two are further apart
-  than ``safety_radius`` (closer, it would stand in the other's way and be pushed along). An agent
-  it holds this way no longer waits for it by the plan's order or the goal order.
+  until ``order_patience`` steps after it first held for that agent. It begins to hold only while
+  the two are further apart than ``safety_radius`` (closer, it would stand in the other's way and
+  be pushed along). An agent it holds this way no longer waits for it by the plan's order or the
+  goal order.
 - Of two agents close enough to yield, where one stands within ``goal_clearance`` of the goal the
   other is on its way to, the one nearer the other's goal goes first; the pair keeps that order
   while close (two agents pushing each other would hand it back and forth).
@@ -20,6 +21,16 @@ import math
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 import numpy as np
+
+
+def pair_proximity(distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                   proximity: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]],
+                   obs_a: np.ndarray, obs_b: np.ndarray) -> np.ndarray:
+    """How close agents are, pair by pair (the controller's yield rule): ``proximity`` where given, else
+    ``distance`` taken the shorter way."""
+    if proximity is not None:
+        return np.asarray(proximity(obs_a, obs_b), dtype=np.float64)
+    return np.minimum(np.asarray(distance(obs_a, obs_b)), np.asarray(distance(obs_b, obs_a)))
 
 
 class GoalClearance:
@@ -85,12 +96,7 @@ class GoalClearance:
         yield rule settles which of them goes."""
         if self.safety_radius is None:
             return False
-        if self.proximity is not None:
-            p = float(np.asarray(self.proximity(x[None], y[None])).reshape(-1)[0])
-        else:
-            p = float(min(np.asarray(self.distance(x[None], y[None])).reshape(-1)[0],
-                          np.asarray(self.distance(y[None], x[None])).reshape(-1)[0]))
-        return p < self.safety_radius
+        return bool(pair_proximity(self.distance, self.proximity, x[None], y[None]).reshape(-1)[0] < self.safety_radius)
 
     def _goal_first(self, live: List[str], obs: np.ndarray, ii: np.ndarray, jj: np.ndarray, close: np.ndarray,
                     i_first: np.ndarray, before: Dict[Tuple[str, str], str]) -> np.ndarray:
@@ -126,4 +132,4 @@ class GoalClearance:
         return out
 
 
-__all__ = ["GoalClearance"]
+__all__ = ["GoalClearance", "pair_proximity"]

@@ -59,7 +59,7 @@ from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .clearance import GoalClearance
+from .clearance import GoalClearance, pair_proximity
 
 PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 PairFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -571,12 +571,8 @@ class WaypointController(GoalClearance):
         ii, jj = ii[both], jj[both]
         if len(ii) == 0:
             return {}
-        if self.proximity is not None:
-            prox = np.asarray(self.proximity(obs[ii], obs[jj]), dtype=np.float64)
-        else:
-            prox = np.minimum(np.asarray(self.distance(obs[ii], obs[jj])), np.asarray(self.distance(obs[jj], obs[ii])))
         assert self.safety_radius is not None  # checked by the caller
-        close = prox < self.safety_radius
+        close = pair_proximity(self.distance, self.proximity, obs[ii], obs[jj]) < self.safety_radius
         if not close.any():
             return {}
         lag = np.array([self._lag(a) for a in live])
