@@ -476,6 +476,7 @@ def build_problem_graph(
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
     avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0, cost_guard: Optional[float] = 2.0,
+    detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -490,6 +491,10 @@ def build_problem_graph(
     ``avoid_slack`` longer, ``D[u, o] + D[o, v] <= D[u, v] + avoid_slack``. An agent whose shortest
     route the cut-off made more than ``cost_guard`` times as costly by the critic as its shortest
     route without it gets that route too (:func:`admit_cheaper_routes`; ``None``: never).
+    ``detached`` lists buffer nodes no start may link to directly (an agent that failed to reach them
+    from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
+    that may not link to a goal directly (an agent failed to reach its goal from them); routes may
+    still pass them.
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -498,6 +503,16 @@ def build_problem_graph(
     ee = np.asarray(np.zeros((0, 2)) if exclude_edges is None else exclude_edges, dtype=np.int64).reshape(-1, 2)
     if len(ee) and (ee.min() < 0 or ee.max() >= n):
         raise ValueError(f"exclude_edges must hold pairs of buffer node ids in [0, {n}), got {ee.tolist()}")
+    k = len(starts)
+    for name, nodes, ends in (("detached", detached, np.arange(n, n + k)),
+                              ("goal_detached", goal_detached, np.arange(n + k, n + 2 * k))):
+        dt = np.unique(np.asarray([] if nodes is None else nodes, dtype=np.int64))
+        if len(dt) and (dt.min() < 0 or dt.max() >= n):
+            raise ValueError(f"{name} must hold buffer node ids in [0, {n}), got {dt.tolist()}")
+        if len(dt):  # start -> detached node, or goal_detached node -> goal, for every agent
+            a, b = np.meshgrid(ends, dt, indexing="ij")
+            pairs = np.stack([a, b] if name == "detached" else [b, a], axis=-1).reshape(-1, 2)
+            ee = np.concatenate([ee, pairs])
     D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False

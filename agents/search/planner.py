@@ -416,7 +416,9 @@ class BufferPlanner:
         return starts, goals
 
     def problem_graph(self, starts: np.ndarray, goals: np.ndarray, exclude: Optional[Sequence[int]] = None,
-                      exclude_edges: Optional[np.ndarray] = None, avoid: Optional[np.ndarray] = None) -> ProblemGraph:
+                      exclude_edges: Optional[np.ndarray] = None, avoid: Optional[np.ndarray] = None,
+                      detached: Optional[Sequence[int]] = None,
+                      goal_detached: Optional[Sequence[int]] = None) -> ProblemGraph:
         """The graph a problem is searched on: buffer nodes plus the agents' start and goal
         observations, pruned with this planner's cut-offs (see
         :func:`~agents.search.graph.build_problem_graph`; edges that pass a place of ``avoid`` go
@@ -426,11 +428,12 @@ class BufferPlanner:
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
-                                   cost_guard=self.cost_guard)
+                                   cost_guard=self.cost_guard, detached=detached, goal_detached=goal_detached)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,
-             avoid: Optional[np.ndarray] = None) -> MultiAgentPlan:
+             avoid: Optional[np.ndarray] = None, detached: Optional[Sequence[int]] = None,
+             goal_detached: Optional[Sequence[int]] = None) -> MultiAgentPlan:
         """Plan for agents starting at observations ``starts[i]`` and going to ``goals[i]``.
 
         ``budget`` (optional) bounds each agent's total predicted cost: every agent's route is
@@ -443,10 +446,13 @@ class BufferPlanner:
         a waypoint an agent failed to reach when it replans; ``exclude_edges`` (optional, ``(E, 2)``)
         pairs of buffer nodes whose edge the plan must not use, e.g. edges agents failed to traverse;
         ``avoid`` (optional) observations of places no edge may pass within the proximity radius,
-        e.g. where agents are parked.
+        e.g. where agents are parked; ``detached`` (optional) buffer nodes no start may link to
+        directly, e.g. those an agent failed to reach from where it stood, and ``goal_detached``
+        (optional) buffer nodes that may not link to a goal directly, e.g. those an agent failed to
+        reach its goal from.
         """
         t0 = time.perf_counter()
-        problem = self.problem_graph(starts, goals, exclude, exclude_edges, avoid)
+        problem = self.problem_graph(starts, goals, exclude, exclude_edges, avoid, detached, goal_detached)
         k = problem.n_agents
         s_ids, g_ids = problem.start_ids, problem.goal_ids
         D, C, c_max, graph = problem.D, problem.C, problem.c_max, problem.graph

@@ -35,7 +35,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .controller import AgentPlan, ControllerStats, WaypointController
-from .dependencies import goal_passers, nodes_near, plan_dependencies, proximity_relation, shut_out
+from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
 from .graph import NodePairwise, ProblemGraph
 from .models import (
     buffer_observations,
@@ -48,7 +48,8 @@ from .models import (
     policy_fn,
 )
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
-from .repair import EdgeMemory, edges_near, near_either_way, past_failed_waypoints
+from .repair import EdgeMemory
+from .replanning import StuckReplanning
 
 
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
@@ -80,7 +81,7 @@ class Leg:
     started: int
 
 
-class SearchPolicy:
+class SearchPolicy(StuckReplanning):
     """Search on the replay buffer with CBS, driven by a goal-conditioned policy (``predict``).
 
     Args:
@@ -105,21 +106,17 @@ class SearchPolicy:
         reach_threshold: a waypoint is reached at a predicted distance below this (steps);
             default :func:`default_reach_threshold` of the model that judges it.
         safety_radius: agents closer than this (predicted steps) yield to each other.
-        replan_when_stuck: an agent stuck twice on the way to one waypoint gets a new
-            single-agent plan from where it stands, on the same graph without that waypoint
-            and the nodes within ``ban_radius`` predicted steps of it (a buffer graph has many
-            nodes at almost the same place, and a critic that misjudged one edge misjudges their
-            edges too); if that ban cuts every route (the only doorway), it bans only the
-            waypoints it failed to reach; if there is still none, it localises: it plans from
-            where it stands on the whole graph less the edges it failed on (its start is attached
-            to the nodes the critic puts nearest); only if that fails too it gives the waypoint up.
-            These replans keep clear of the nodes within ``ban_radius`` of the goals of agents that
-            have arrived (parked there), or, where that cuts every route, within 0.85 or 0.7 of it
-            (the widest berth the graph leaves past an agent parked beside the only door). A
-            waypoint it failed on twice that such a replan cannot avoid, it heads past
-            (:func:`~agents.search.repair.past_failed_waypoints`). The edge it failed on is
-            recorded in ``memory``.
+        replan_when_stuck: an agent stuck twice on the way to one waypoint gets a new single-agent
+            plan from where it stands, around that waypoint and the nodes within ``ban_radius``
+            predicted steps of it (a buffer graph has many nodes at almost the same place, and a
+            critic that misjudged one edge misjudges their edges too), clear of agents parked at
+            their goals, or localised; the edge it failed on is recorded in ``memory``. The steps:
+            :mod:`agents.search.replanning`.
         ban_radius: see ``replan_when_stuck``.
+        detach_radius: where an agent set off for a node (or its goal) as one edge away and the
+            critic now puts it far, the nodes within this many predicted steps of that node (of the
+            node it set off from) are no longer linked to its start (its goal) in its replans of the
+            episode (``None``: never); see :mod:`agents.search.replanning`.
         park_clearance: with ``hold="order"``, agents also park after those their goal would shut
             out (:func:`~agents.search.dependencies.shut_out`, this many predicted steps); ``None``: off.
         seed: seed of the controller's escape actions (each episode starts from it).
@@ -147,6 +144,7 @@ class SearchPolicy:
         safety_radius: Optional[float] = 2.0,
         replan_when_stuck: bool = True,
         ban_radius: float = 3.0,
+        detach_radius: Optional[float] = 3.0,
         park_clearance: Optional[float] = None,
         seed: Optional[int] = 0,
         deterministic: bool = True,
@@ -179,6 +177,9 @@ class SearchPolicy:
         self.safety_radius = safety_radius
         self.replan_when_stuck = bool(replan_when_stuck)
         self.ban_radius = float(ban_radius)
+        if detach_radius is not None and not detach_radius >= 0:
+            raise ValueError(f"detach_radius must be >= 0 or None, got {detach_radius!r}")
+        self.detach_radius = detach_radius
         if park_clearance is not None and not park_clearance > 0:
             raise ValueError(f"park_clearance must be > 0 or None, got {park_clearance!r}")
         self.park_clearance = None if park_clearance is None else float(park_clearance)
@@ -304,6 +305,10 @@ class SearchPolicy:
         self._banned: Dict[str, List[int]] = {}
         #: per agent: the buffer edges it failed on this episode (left out of its replans)
         self._failed_edges: Dict[str, List[Tuple[int, int]]] = {}
+        #: per agent: the buffer nodes its replans may not link its start to (it failed to reach them)
+        self._detached: Dict[str, List[int]] = {}
+        #: per agent: the buffer nodes its replans may not link to its goal (it failed to reach its goal from them)
+        self._goal_detached: Dict[str, List[int]] = {}
         #: per agent: the waypoint index last seen, and whether its route changed since (for successes)
         self._seen_index: Dict[str, int] = {}
         #: per agent: the waypoint nodes it failed to reach since its last full plan
@@ -462,6 +467,8 @@ class SearchPolicy:
             self._banned = {a: [] for a in names}
             self._failed = {a: [] for a in names}
             self._failed_edges = {a: [] for a in names}
+            self._detached = {a: [] for a in names}
+            self._goal_detached = {a: [] for a in names}
             self._seen_index = {a: 0 for a in names}
         self.planning_time = time.perf_counter() - t0
         self.agents = names
@@ -507,11 +514,6 @@ class SearchPolicy:
             now = self._seen_index[a] = self.controller.index.get(a, seen)
             self.memory.record_route(self.routes.get(a, []), seen, now, n)
 
-    def _exclude_edges(self, agent: str) -> np.ndarray:
-        """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
-        own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
-        return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
-
     def _goal_blockers(self, agent: str) -> List[Tuple[str, int]]:
         """The controller's ``goal_order``: :func:`~agents.search.dependencies.goal_passers` of
         ``agent`` on the routes as they are now, within the planner's proximity radius."""
@@ -526,74 +528,6 @@ class SearchPolicy:
             under_way = {b: v for b, v in others.items() if b in self._last_names and b not in dict(out)}
             out += shut_out(problem, goal, under_way, self.park_clearance, self._cut_cache)
         return out
-
-    def _parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
-        """Buffer nodes within ``share * ban_radius`` predicted steps of the goals of the agents that have
-        arrived (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
-        parked = [self._route_graph[b][:2] for b in self.agents
-                  if b != agent and b not in self._last_names and b in self._route_graph]
-        r = share * self.ban_radius
-        return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, r))]
-
-    def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
-        """The controller's callback for a stuck agent (see ``replan_when_stuck``)."""
-        assert self.planner is not None and self.controller is not None
-        t1 = time.perf_counter()
-        p = self.planner
-        n_nodes = len(p.observations)
-        k = self.controller.index[agent]
-        route = self.routes[agent]
-        leg = self.leg(agent)
-        if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
-            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, self.ban_radius))
-            self.memory.record_failure(leg.source, leg.target)
-        # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
-        # nodes right by it
-        f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
-        if f < n_nodes:
-            near = near_either_way(p.D, f, self.ban_radius)
-            self._failed[agent].append(f)
-            self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
-        edges = self._exclude_edges(agent)
-        parked = self._parked_nodes(agent)
-        # where the agents that arrived stand (last seen), parked
-        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
-        # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
-        # a parked agent), tried in turn: around the failed waypoints and their neighbourhoods; around
-        # the failed waypoints only (the neighbourhood held the only doorway); localised, from where it
-        # stands over any node, with a berth of 1, 0.85 or 0.7 ban radii around parked agents (one
-        # beside the only door: the widest berth left), then past them; and at last over the edges it
-        # failed on too (it was not where its route said when it failed, or another agent was in the way)
-        attempts = [(self._banned[agent], self._banned[agent] + parked, edges, True),
-                    (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
-                    *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
-                    ([], parked, edges, False), ([], [], self.memory.removed(), False), ([], [], None, False)]
-        tried = []
-        for banned, exclude, exclude_edges, avoid in attempts:
-            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at))
-            if key in tried:
-                continue
-            tried.append(key)
-            sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
-                         exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None)
-            if sub.solved:
-                self._banned[agent] = banned
-                break
-        if sub.solved:
-            assert sub.problem is not None  # a solved plan keeps its problem graph
-            new = sub.agent_plans([agent], hold="waits")[agent]
-            keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent])
-            new = AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
-            self.routes[agent] = [sub.nodes[0][i] for i in keep]
-            self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
-        else:  # no other way on the graph: give the waypoint up
-            new = AgentPlan(current.waypoints[k + 1:], current.goal)
-            self.routes[agent] = route[k + 1:]
-            if agent in self._route_graph:  # the rest of the route, from here
-                self._route_graph[agent] = (*self._route_graph[agent][:2], self.controller.t)
-        self._seen_index[agent] = 0
-        self.replan_time += time.perf_counter() - t1
-        return new
 
 
 __all__ = ["Leg", "SearchPolicy"]

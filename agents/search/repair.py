@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
-from typing import Any, Dict, List, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -139,7 +139,8 @@ class EdgeMemory:
 
 
 def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed: Sequence[int],
-                          times: int = 2, detour: float = 1.5) -> List[int]:
+                          times: int = 2, detour: float = 1.5,
+                          straight: Optional[Callable[[int, int], float]] = None) -> List[int]:
     """The positions in ``route`` to keep once the waypoints an agent failed on again and again are skipped.
 
     A learned policy can fail on one waypoint episode after episode (one in a doorway, which it
@@ -152,14 +153,17 @@ def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed
         route: node ids of a new route (its start first, its goal left out).
         goal: the goal's node id; ``D``: predicted distances between the nodes.
         failed: the waypoints the agent failed to reach so far (one entry per failure).
+        straight: ``straight(u, w)``, the critic's distance from node ``u`` to node ``w`` (default:
+            ``D[u, w]``); for a problem graph whose ``D`` is exact only below ``d_max`` (beyond, a bound).
     """
+    straight = straight if straight is not None else (lambda u, w: float(D[u, w]))
     fails = Counter(failed)
     keep = list(range(len(route)))
     i = 1
     while i < len(keep):
         u, v = route[keep[i - 1]], route[keep[i]]
         w = route[keep[i + 1]] if i + 1 < len(keep) else goal
-        if fails[v] >= times and D[u, w] <= detour * (D[u, v] + D[v, w]):
+        if fails[v] >= times and straight(u, w) <= detour * (D[u, v] + D[v, w]):
             del keep[i]
         else:
             i += 1

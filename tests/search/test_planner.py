@@ -173,6 +173,34 @@ def test_excluded_nodes_are_never_used():
         planner.plan(start, goal, exclude=[len(pts)])
 
 
+def test_detached_nodes_are_not_linked_to_the_start_but_routes_may_pass_them():
+    """A replanning agent that failed to reach a node from where it stood (the critic took its place for one
+    near that node) may not link its start to it again; a route through it from other nodes is kept."""
+    pts = grid_points(7)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=None, suboptimality=1.0)
+    start, goal = np.array([[0.0, 3.0]]), np.array([[6.0, 3.0]])
+    first = planner.plan(start, goal).nodes[0][1]
+    plan = planner.plan(start, goal, detached=[first])
+    assert plan.solved and plan.nodes[0][1] != first  # the start links to another node
+    problem = planner.problem_graph(start, goal, detached=[first])
+    n, s = len(pts), problem.start_ids[0]
+    linked = problem.graph.distance[s].indices
+    assert len(linked) and first not in linked.tolist()
+    into_first = problem.graph.distance[:n, first].nonzero()[0]
+    assert len(into_first) and np.allclose(problem.graph.distance[:n, :n].toarray(), planner.problem_graph(
+        start, goal).graph.distance[:n, :n].toarray())  # between buffer nodes the graph is unchanged
+    # nodes beside the goal no longer linked to it: the route reaches it from another node
+    last = planner.plan(start, goal).nodes[0][-1]
+    other = planner.plan(start, goal, goal_detached=[last])
+    assert other.solved and other.nodes[0][-1] != last
+    g = planner.problem_graph(start, goal, goal_detached=[last])
+    assert g.graph.distance[last, g.goal_ids[0]] == 0 and g.graph.distance[:n, g.goal_ids[0]].nnz
+    with pytest.raises(ValueError, match="detached must hold buffer node ids"):
+        planner.plan(start, goal, detached=[-1])
+    with pytest.raises(ValueError, match="goal_detached must hold buffer node ids"):
+        planner.plan(start, goal, goal_detached=[n])
+
+
 @pytest.mark.parametrize("time_model", ["durative", "unit"])
 def test_a_single_agent_gets_the_path_cbs_would_give(time_model):
     pts = grid_points(6)

@@ -207,6 +207,11 @@ def test_past_failed_waypoints_skips_only_what_failed_twice_and_is_no_detour():
     # the waypoint in the wall's door: heading past it is 9 steps against 1 + 1 through it
     assert past_failed_waypoints([0, 1], 5, D, failed=[1, 1]) == [0, 1]
     assert past_failed_waypoints([0, 1], 5, D, failed=[1, 1], detour=5.0) == [0]
+    # a problem graph holds only a bound beyond d_max (here 2.5 for the 9 steps): heading past asks the critic
+    bound = D.copy()
+    bound[0, 5] = 2.5
+    assert past_failed_waypoints([0, 1], 5, bound, failed=[1, 1]) == [0]  # misled by the bound
+    assert past_failed_waypoints([0, 1], 5, bound, failed=[1, 1], straight=lambda u, w: D[u, w]) == [0, 1]
 
 
 def test_an_agent_stuck_twice_in_front_of_a_door_keeps_the_door(world, planner):
@@ -394,3 +399,89 @@ def test_a_stuck_agent_leaves_out_the_edges_beside_the_one_it_failed_on(world, p
               and min(D[u, bad[0]], D[bad[0], u]) < 2.5 and min(D[v, bad[1]], D[bad[1], v]) < 2.5]
     assert bad in out and len(beside) > 1 and set(beside) <= out
     assert policy.memory.failures == {bad: 1}  # the memory counts the edge it failed on only
+
+
+class TwinWorld(OpenWorld):
+    """The open room, but its corner by (1, 1) looks like the place by (9, 5): from every point within 1.5 of
+    (1, 1) the stand-in critic takes every node within 2.5 of (9, 5) for one a single step away, except the
+    node at (9, 7) from points right of x = 1.2 (where it sees that node is far)."""
+
+    def _seg(self, a, b):
+        d, c = super()._seg(a, b)
+        a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
+        twin = (np.linalg.norm(a - 1.0, axis=-1) < 1.5) & (np.linalg.norm(b - [9.0, 5.0], axis=-1) < 2.5)
+        seen = (a[..., 0] > 1.2) & (np.linalg.norm(b - [9.0, 7.0], axis=-1) < 0.1)
+        return np.where(twin & ~seen, 1.0, d), c
+
+
+def test_an_agent_that_lost_the_node_it_set_off_for_links_no_more_to_nodes_beside_it():
+    """A start attached to a far place the critic takes for a near one (a wormhole from where the agent
+    stands): stuck a little further on, where the critic finds that node far, the agent's replans no longer
+    link its start to the nodes beside it (the critic still takes them for near ones); without
+    ``detach_radius`` they do, and where the critic still finds the node near (a hard edge, not a wormhole)
+    nothing is detached."""
+    world = TwinWorld()
+    nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0, 9.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    twins = set(np.flatnonzero(np.linalg.norm(nodes - [9.0, 5.0], axis=1) < 2.5).tolist())
+    goal = np.array([9.0, 9.0], np.float32)
+    start, further = np.array([1.0, 1.0], np.float32), np.array([1.3, 1.0], np.float32)
+    firsts, detached = {}, {}
+    for radius, where in ((None, "further"), (3.0, "further"), (3.0, "start")):
+        stuck_at = further if where == "further" else start
+        policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=0.5,
+                              detach_radius=radius)
+        policy.predict({"observation": start, "desired_goal": goal})
+        bad = policy.routes["agent_0"][1]
+        assert np.allclose(nodes[bad], (9.0, 7.0))  # the wormhole: a single step to the far place
+        stand_until_replans(policy, {"observation": stuck_at, "desired_goal": goal}, 1)
+        firsts[radius, where] = policy.routes["agent_0"][1]
+        detached[radius, where] = set(policy._detached["agent_0"])
+    beside = {i for i in range(len(nodes)) if min(D[i, bad], D[bad, i]) < 3.0} | {bad}
+    assert firsts[None, "further"] in twins - {bad}  # the next node beside it
+    assert detached[3.0, "further"] == beside and firsts[3.0, "further"] not in beside  # a way through the room
+    assert detached[3.0, "start"] == set()  # it still finds the node near: nothing detached
+    with pytest.raises(ValueError, match="detach_radius"):
+        SearchPolicy(planner, world, detach_radius=-1.0)
+
+
+class GoalTwinWorld(OpenWorld):
+    """The open room, but the stand-in critic takes every point within 2.5 of (1, 9) for one a single step
+    from the goal at (9, 9)."""
+
+    def _seg(self, a, b):
+        d, c = super()._seg(a, b)
+        a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
+        twin = (np.linalg.norm(a - [1.0, 9.0], axis=-1) < 2.5) & (np.linalg.norm(b - 9.0, axis=-1) < 0.1)
+        return np.where(twin, 1.0, d), c
+
+
+def test_an_agent_that_lost_its_goal_on_the_last_leg_links_no_more_nodes_beside_that_legs_start_to_it():
+    """The critic takes a corner for a place beside the goal: every node there is one step from the goal.
+    Stuck on the last leg where the critic finds the goal far, the agent's replans no longer link the
+    nodes beside the one it set off from to its goal; without ``detach_radius`` they link the next one."""
+    world = GoalTwinWorld()
+    nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    corner = set(np.flatnonzero(np.linalg.norm(nodes - [1.0, 9.0], axis=1) < 2.5).tolist())
+    goal = np.array([9.0, 9.0], np.float32)
+    lasts, detached = {}, {}
+    for radius in (None, 3.0):
+        policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=0.5,
+                              detach_radius=radius)
+        obs = {"observation": np.array([1.0, 1.0], np.float32), "desired_goal": goal}
+        policy.predict(obs)
+        assert policy.routes["agent_0"][-1] in corner  # the wormhole: one step from the corner to the goal
+        while policy.leg("agent_0").target is not None:  # drive along the route to its last node
+            obs = {"observation": nodes[policy.leg("agent_0").target], "desired_goal": goal}
+            policy.predict(obs)
+        source = policy.leg("agent_0").source
+        stand_until_replans(policy, {"observation": np.array([3.0, 5.0], np.float32), "desired_goal": goal}, 1)
+        lasts[radius] = policy.routes["agent_0"][-1]
+        detached[radius] = set(policy._goal_detached["agent_0"])
+    assert lasts[None] in corner - {source}  # the next corner node
+    beside = {i for i in range(len(nodes)) if min(D[i, source], D[source, i]) < 3.0} | {source}
+    assert detached[None] == set() and detached[3.0] == beside and corner <= beside
+    assert lasts[3.0] not in corner  # a way through the room

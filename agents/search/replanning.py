@@ -1,0 +1,174 @@
+"""What :class:`~agents.search.policy.SearchPolicy` does for an agent its controller finds stuck
+(``replan_when_stuck``). A mixin: the policy keeps the episode state these methods read and write.
+
+- The edge the agent was on is recorded: in its failed edges for this episode, with the edges
+  between the nodes right by its two ends (:func:`~agents.search.repair.edges_near`: a critic that
+  took two far places for near ones misjudges their neighbours too), and in the ``memory``.
+- The node it failed to reach and the nodes within ``ban_radius`` of it (either way) are banned.
+- Where the critic now puts the leg's target beyond two edges' reach (``2 * d_max``), though the
+  agent set off for it as one edge away, the critic took one place for another (two panoramas
+  alike: a wormhole). With ``detach_radius``, for the rest of the episode: a target node and the
+  nodes within ``detach_radius`` of it are no longer linked to the agent's start (from where it
+  stands now the critic may well take it for a place beside them again); on the last leg, the
+  node it set off from and the nodes within ``detach_radius`` of it are no longer linked to its
+  goal (the critic takes them for places beside the goal). Routes may still pass them.
+- Then it plans alone from where it stands, trying in turn: around the failed waypoints and their
+  neighbourhoods; around the failed waypoints only (the neighbourhood held the only doorway);
+  localised (its start attached to the nodes the critic puts nearest), with a berth of 1, 0.85 or
+  0.7 ban radii around the goals of parked agents, then past them. It tries these first with the
+  detached nodes off its start, then with them back (where it stands right by the node it failed
+  to reach, they may be all it can link to); then over the edges the memory kept; and at last over
+  the edges it failed on too (it was not where its route said when it failed, or another agent
+  was in the way). Only if none is solved it gives the waypoint up.
+- A waypoint it failed on twice that the new route cannot avoid, it heads past
+  (:func:`~agents.search.repair.past_failed_waypoints`, with the critic's distance where the
+  problem graph holds only a bound: beyond ``d_max``).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .controller import AgentPlan
+from .dependencies import nodes_near
+from .repair import edges_near, near_either_way, past_failed_waypoints
+
+
+class StuckReplanning:
+    """Replans for stuck agents; mixed into :class:`~agents.search.policy.SearchPolicy`."""
+
+    planner: Any
+    controller: Any
+    memory: Any
+    budget: Optional[float]
+    ban_radius: float
+    detach_radius: Optional[float]
+    agents: List[str]
+    routes: Dict[str, List[int]]
+    replan_time: float
+    _route_graph: Dict[str, Tuple[Any, int, int]]
+    _banned: Dict[str, List[int]]
+    _failed: Dict[str, List[int]]
+    _failed_edges: Dict[str, List[Tuple[int, int]]]
+    _detached: Dict[str, List[int]]
+    _goal_detached: Dict[str, List[int]]
+    _seen_index: Dict[str, int]
+    _goals: Dict[str, np.ndarray]
+    _last_obs: Dict[str, np.ndarray]
+    _last_names: set
+    leg: Callable[[str], Any]
+    _distance: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+    def _exclude_edges(self, agent: str) -> np.ndarray:
+        """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
+        own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
+        return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
+
+    def _parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
+        """Buffer nodes within ``share * ban_radius`` predicted steps of the goals of the agents that have
+        arrived (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
+        parked = [self._route_graph[b][:2] for b in self.agents
+                  if b != agent and b not in self._last_names and b in self._route_graph]
+        r = share * self.ban_radius
+        return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, r))]
+
+    def _straight(self, problem: Any) -> Callable[[int, int], float]:
+        """The critic's distance between two nodes of ``problem``: exact where its ``D`` holds only a bound."""
+        d_max = self.planner.d_max
+
+        def straight(u: int, w: int) -> float:
+            d = float(problem.D[u, w])
+            if d < d_max:
+                return d
+            return float(self._distance(problem.observations[[u]], problem.observations[[w]])[0])
+
+        return straight
+
+    def _detach(self, agent: str, ob: np.ndarray, source: Optional[int], target: Optional[int]) -> None:
+        """Detach the nodes beside the ends of the leg ``source -> target`` (buffer ids; ``None``: the
+        agent's start or goal) where the critic now puts the target beyond two edges' reach."""
+        p = self.planner
+        goal = self._goals[agent]
+        to = p.observations[[target]] if target is not None else goal[None]
+        if source is None and target is None or float(self._distance(ob[None], to)[0]) < 2 * p.d_max:
+            return
+        assert self.detach_radius is not None  # checked by the caller
+        if target is not None:  # no more from its start to the target or the nodes beside it
+            near = near_either_way(p.D, target, self.detach_radius)
+            self._detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [target])
+        else:  # no more to its goal from the source or the nodes beside it
+            assert source is not None
+            near = near_either_way(p.D, source, self.detach_radius)
+            self._goal_detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [source])
+
+    def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
+        """The controller's callback for a stuck agent (see the module's docstring)."""
+        assert self.planner is not None and self.controller is not None
+        t1 = time.perf_counter()
+        p = self.planner
+        n_nodes = len(p.observations)
+        k = self.controller.index[agent]
+        route = self.routes[agent]
+        leg = self.leg(agent)
+        if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
+            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, self.ban_radius))
+            self.memory.record_failure(leg.source, leg.target)
+        if leg is not None and self.detach_radius is not None:
+            self._detach(agent, ob, leg.source, leg.target)
+        # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
+        # nodes right by it
+        f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
+        if f < n_nodes:
+            near = near_either_way(p.D, f, self.ban_radius)
+            self._failed[agent].append(f)
+            self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
+        edges = self._exclude_edges(agent)
+        parked = self._parked_nodes(agent)
+        # where the agents that arrived stand (last seen), parked
+        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
+        # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
+        # a parked agent, (nodes not linked to the start, nodes not linked to the goal)), tried in turn as the
+        # module's docstring says
+        plans: List[Tuple[Any, ...]] = [(self._banned[agent], self._banned[agent] + parked, edges, True),
+                 (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
+                 *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
+                 ([], parked, edges, False)]
+        none: Tuple[List[int], List[int]] = ([], [])
+        detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
+        attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
+            ([], [], self.memory.removed(), False, detached), ([], [], self.memory.removed(), False, none),
+            ([], [], None, False, none)]
+        tried = []
+        for banned, exclude, exclude_edges, avoid, detach in attempts:
+            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at),
+                   detach)
+            if key in tried:
+                continue
+            tried.append(key)
+            sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
+                         exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None, detached=detach[0],
+                         goal_detached=detach[1])
+            if sub.solved:
+                self._banned[agent] = banned
+                break
+        if sub.solved:
+            assert sub.problem is not None  # a solved plan keeps its problem graph
+            new = sub.agent_plans([agent], hold="waits")[agent]
+            keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent],
+                                         straight=self._straight(sub.problem))
+            new = AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
+            self.routes[agent] = [sub.nodes[0][i] for i in keep]
+            self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
+        else:  # no other way on the graph: give the waypoint up
+            new = AgentPlan(current.waypoints[k + 1:], current.goal)
+            self.routes[agent] = route[k + 1:]
+            if agent in self._route_graph:  # the rest of the route, from here
+                self._route_graph[agent] = (*self._route_graph[agent][:2], self.controller.t)
+        self._seen_index[agent] = 0
+        self.replan_time += time.perf_counter() - t1
+        return new
+
+
+__all__ = ["StuckReplanning"]
