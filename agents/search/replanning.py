@@ -15,11 +15,12 @@
 - Then it plans alone from where it stands, trying in turn: around the failed waypoints and their
   neighbourhoods; around the failed waypoints only (the neighbourhood held the only doorway);
   localised (its start attached to the nodes the critic puts nearest), with a berth of 1, 0.85 or
-  0.7 ban radii around the goals of parked agents, then past them. It tries these first with the
-  detached nodes off its start, then with them back (where it stands right by the node it failed
-  to reach, they may be all it can link to); then over the edges the memory kept; and at last over
-  the edges it failed on too (it was not where its route said when it failed, or another agent
-  was in the way). Only if none is solved it gives the waypoint up.
+  0.7 ban radii around the goals of parked agents, then past them. It tries these first without
+  the detached links, then with them back (where it stands right by the node it failed to reach,
+  they may be all it can link to); then over the edges it failed on itself, less those the memory
+  removed (without the detached links, then with them); and at last over every edge (it was not
+  where its route said when it failed, or another agent was in the way). Only if none is solved
+  it gives the waypoint up.
 - A waypoint it failed on twice that the new route cannot avoid, it heads past
   (:func:`~agents.search.repair.past_failed_waypoints`, with the critic's distance where the
   problem graph holds only a bound: beyond ``d_max``).
@@ -131,10 +132,11 @@ class StuckReplanning:
         # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
         # a parked agent, (nodes not linked to the start, nodes not linked to the goal)), tried in turn as the
         # module's docstring says
-        plans: List[Tuple[Any, ...]] = [(self._banned[agent], self._banned[agent] + parked, edges, True),
-                 (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
-                 *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
-                 ([], parked, edges, False)]
+        plans: List[Tuple[Any, ...]] = [
+            (self._banned[agent], self._banned[agent] + parked, edges, True),
+            (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
+            *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
+            ([], parked, edges, False)]
         none: Tuple[List[int], List[int]] = ([], [])
         detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
         attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
