@@ -477,6 +477,7 @@ def build_problem_graph(
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
     avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0, cost_guard: Optional[float] = 2.0,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
+    attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -494,7 +495,8 @@ def build_problem_graph(
     ``detached`` lists buffer nodes no start may link to directly (an agent that failed to reach them
     from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
-    still pass them.
+    still pass them. ``attached``: what :func:`attach_endpoints` returns for these starts and goals,
+    where it was computed before (it is the expensive step: the critic scores every new pair).
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -513,7 +515,9 @@ def build_problem_graph(
             a, b = np.meshgrid(ends, dt, indexing="ij")
             pairs = np.stack([a, b] if name == "detached" else [b, a], axis=-1).reshape(-1, 2)
             ee = np.concatenate([ee, pairs])
-    D2, C2, obs = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
+    if attached is None:
+        attached = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
+    D2, C2, obs = attached
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False
     keep[:, ex] = False

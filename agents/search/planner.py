@@ -46,7 +46,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from .controller import AgentPlan
-from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, build_problem_graph
+from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, attach_endpoints, build_problem_graph
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
@@ -357,6 +357,8 @@ class BufferPlanner:
             raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self._buffer_graph: Optional[WaypointGraph] = None
+        #: the last endpoints attached (a stuck agent's replan tries several graphs from one place) and the result
+        self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
 
     @property
     def buffer_graph(self) -> WaypointGraph:
@@ -424,11 +426,16 @@ class BufferPlanner:
         :func:`~agents.search.graph.build_problem_graph`; edges that pass a place of ``avoid`` go
         within the proximity radius)."""
         starts, goals = self._check_endpoints(starts, goals)
+        key = (starts.shape, starts.tobytes(), goals.tobytes())
+        if self._attached is None or self._attached[0] != key:
+            self._attached = (key, attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
+                                                    self.d_max))
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
-                                   cost_guard=self.cost_guard, detached=detached, goal_detached=goal_detached)
+                                   cost_guard=self.cost_guard, detached=detached, goal_detached=goal_detached,
+                                   attached=self._attached[1])
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,

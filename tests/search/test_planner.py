@@ -373,3 +373,28 @@ def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
     assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
     keep, D, C = graph(direct=2.6)
     assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0, corroboration=3.0).tolist() == [True]
+
+
+def test_the_endpoints_are_attached_once_for_the_graphs_of_one_place():
+    """A stuck agent's replan tries several graphs from where it stands: the critic scores its start and
+    goal against the nodes once, and again only for other endpoints."""
+    pts = grid_points(5)
+    inner = euclid_pairwise()
+    calls = []
+
+    def counting(a, b):
+        calls.append((len(a), len(b)))
+        return inner(a, b)
+
+    planner = make_planner(pts, counting, d_max=1.6, proximity_radius=None)
+    calls.clear()
+    start, goal = np.array([[0.0, 2.0]]), np.array([[4.0, 2.0]])
+    plain = planner.problem_graph(start, goal)
+    n_calls = len(calls)
+    assert n_calls > 0
+    again = planner.problem_graph(start, goal, exclude=[7])
+    assert len(calls) == n_calls  # not scored again
+    fresh = make_planner(pts, inner, d_max=1.6, proximity_radius=None).problem_graph(start, goal, exclude=[7])
+    assert (again.graph.distance != fresh.graph.distance).nnz == 0 and np.array_equal(again.D, plain.D)
+    planner.problem_graph(start + 0.5, goal)
+    assert len(calls) > n_calls  # another start: scored
