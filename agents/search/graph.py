@@ -477,7 +477,7 @@ def build_problem_graph(
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
     avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0, cost_guard: Optional[float] = 2.0,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
-    attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
+    attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -496,7 +496,8 @@ def build_problem_graph(
     from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
     still pass them. ``attached``: what :func:`attach_endpoints` returns for these starts and goals,
-    where it was computed before (it is the expensive step: the critic scores every new pair).
+    where it was computed before (it is the expensive step: the critic scores every new pair), and
+    ``passing`` what :func:`passing_edges` returns for them and ``avoid``.
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -523,7 +524,8 @@ def build_problem_graph(
     keep[:, ex] = False
     keep[ee[:, 0], ee[:, 1]] = False
     if avoid is not None and len(avoid):
-        passing = passing_edges(D2, obs, pairwise, np.asarray(avoid, dtype=obs.dtype), avoid_slack, d_max)
+        if passing is None:
+            passing = passing_edges(D2, obs, pairwise, np.asarray(avoid, dtype=obs.dtype), avoid_slack, d_max)
         keep[passing] = False
         ee = np.concatenate([ee, np.argwhere(passing & (D2 < d_max))])
     if max_edges is not None:

@@ -46,7 +46,15 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from .controller import AgentPlan
-from .graph import NodePairwise, PairwiseFn, ProblemGraph, WaypointGraph, attach_endpoints, build_problem_graph
+from .graph import (
+    NodePairwise,
+    PairwiseFn,
+    ProblemGraph,
+    WaypointGraph,
+    attach_endpoints,
+    build_problem_graph,
+    passing_edges,
+)
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
@@ -357,8 +365,10 @@ class BufferPlanner:
             raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self._buffer_graph: Optional[WaypointGraph] = None
-        #: the last endpoints attached (a stuck agent's replan tries several graphs from one place) and the result
+        #: the last endpoints attached (a stuck agent's replan tries several graphs from one place) and the result,
+        #: and the last edges found to pass places to avoid from them
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
+        self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
 
     @property
     def buffer_graph(self) -> WaypointGraph:
@@ -430,12 +440,21 @@ class BufferPlanner:
         if self._attached is None or self._attached[0] != key:
             self._attached = (key, attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                                     self.d_max))
+        passing = None
+        if avoid is not None and len(avoid):
+            D2, _, obs = self._attached[1]
+            places = np.asarray(avoid, dtype=obs.dtype)
+            where = (key, places.shape, places.tobytes())
+            if self._passing is None or self._passing[0] != where:
+                self._passing = (where, passing_edges(D2, obs, self.pairwise, places, self.proximity_radius or 0.0,
+                                                      self.d_max))
+            passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
                                    cost_guard=self.cost_guard, detached=detached, goal_detached=goal_detached,
-                                   attached=self._attached[1])
+                                   attached=self._attached[1], passing=passing)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,

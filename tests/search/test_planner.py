@@ -386,7 +386,7 @@ def test_the_endpoints_are_attached_once_for_the_graphs_of_one_place():
         calls.append((len(a), len(b)))
         return inner(a, b)
 
-    planner = make_planner(pts, counting, d_max=1.6, proximity_radius=None)
+    planner = make_planner(pts, counting, d_max=1.6, proximity_radius=1.0)
     calls.clear()
     start, goal = np.array([[0.0, 2.0]]), np.array([[4.0, 2.0]])
     plain = planner.problem_graph(start, goal)
@@ -394,7 +394,20 @@ def test_the_endpoints_are_attached_once_for_the_graphs_of_one_place():
     assert n_calls > 0
     again = planner.problem_graph(start, goal, exclude=[7])
     assert len(calls) == n_calls  # not scored again
-    fresh = make_planner(pts, inner, d_max=1.6, proximity_radius=None).problem_graph(start, goal, exclude=[7])
+    fresh = make_planner(pts, inner, d_max=1.6, proximity_radius=1.0).problem_graph(start, goal, exclude=[7])
     assert (again.graph.distance != fresh.graph.distance).nnz == 0 and np.array_equal(again.D, plain.D)
+    # so are the places to avoid (where parked agents stand), for the tries that keep clear of them
+    parked = np.array([[2.0, 2.0]])
+    clear = planner.problem_graph(start, goal, avoid=parked)
+    n_calls = len(calls)
+    again = planner.problem_graph(start, goal, exclude=[7], avoid=parked)
+    assert len(calls) == n_calls
+    fresh = make_planner(pts, inner, d_max=1.6, proximity_radius=1.0).problem_graph(start, goal, exclude=[7],
+                                                                                      avoid=parked)
+    assert (again.graph.distance != fresh.graph.distance).nnz == 0
+    assert (clear.graph.distance != plain.graph.distance).nnz  # the edges past (2, 2) are gone
+    planner.problem_graph(start, goal, avoid=parked + 1.0)
+    assert len(calls) > n_calls  # other places: scored
+    n_calls = len(calls)
     planner.problem_graph(start + 0.5, goal)
     assert len(calls) > n_calls  # another start: scored
