@@ -365,8 +365,7 @@ class BufferPlanner:
             raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self._buffer_graph: Optional[WaypointGraph] = None
-        #: the last endpoints attached (a stuck agent's replan tries several graphs from one place) and the result,
-        #: and the last edges found to pass places to avoid from them
+        #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
 
@@ -442,12 +441,11 @@ class BufferPlanner:
                                                     self.d_max))
         passing = None
         if avoid is not None and len(avoid):
-            D2, _, obs = self._attached[1]
-            places = np.asarray(avoid, dtype=obs.dtype)
-            where = (key, places.shape, places.tobytes())
-            if self._passing is None or self._passing[0] != where:
-                self._passing = (where, passing_edges(D2, obs, self.pairwise, places, self.proximity_radius or 0.0,
-                                                      self.d_max))
+            at = np.asarray(avoid, dtype=self.observations.dtype)  # where parked agents stand, say
+            k2 = (key, at.shape, at.tobytes())
+            if self._passing is None or self._passing[0] != k2:
+                D2, _, obs = self._attached[1]
+                self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, self.proximity_radius or 0, self.d_max))
             passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
