@@ -14,6 +14,10 @@ read and write.
 - Of two agents close enough to yield, where one stands within ``goal_clearance`` of the goal the
   other is on its way to, the one nearer the other's goal goes first; the pair keeps that order
   while close (two agents pushing each other would hand it back and forth).
+- (``push_margin``) An agent held still for another that is pushed by it (its predicted distance
+  to its target grows by more than ``push_margin`` steps while it yields for the same target: the
+  panorama policies, trained alone, push a standing agent ahead of them, e.g. back into the door
+  or the dead end it was leaving) goes first from then on; the pair keeps that order while close.
 """
 from __future__ import annotations
 
@@ -48,6 +52,11 @@ class GoalClearance:
     _clearing: Dict[str, str]
     _clear_since: Dict[Tuple[str, str], int]
     _clear_gave_up: Dict[str, Set[str]]
+    push_margin: Optional[float]
+    #: per agent held for another: (that agent, its own target index, its distance to the target then)
+    _yielding: Dict[str, Tuple[str, int, float]]
+    #: close pairs whose order the push rule decided, and the agent that goes first
+    _pushed: Dict[Tuple[str, str], str]
 
     def _clear_goals(self, live: List[str], obs: np.ndarray, hold: np.ndarray, reason: List[Optional[str]],
                      to_target: Dict[str, float]) -> None:
@@ -130,6 +139,41 @@ class GoalClearance:
                 out[q] = first == pair[0]
         self._goal_priority = kept
         return out
+
+    def _push_first(self, live: List[str], ii: np.ndarray, jj: np.ndarray, close: np.ndarray, i_first: np.ndarray,
+                    to_target: Dict[str, float], before: Dict[Tuple[str, str], str],
+                    yielding: Dict[str, Tuple[str, int, float]]) -> np.ndarray:
+        """The yield rule's priorities (``i_first`` per pair ``ii[k], jj[k]``) where an agent held for the
+        other one of a close pair is pushed by it (see ``push_margin`` in the module's docstring).
+        ``before``: the pairs so decided on the last step; ``yielding``: as :meth:`_note_yields` left it."""
+        assert self.push_margin is not None  # checked by the caller
+        out, kept = i_first.copy(), {}
+        for q in np.flatnonzero(close).tolist():
+            pair = (live[ii[q]], live[jj[q]])
+            first = before.get(pair)
+            for y, w in (pair, pair[::-1]):
+                held = yielding.get(y)
+                if first is None and held is not None and held[:2] == (w, self.index[y]) \
+                        and to_target.get(y, -math.inf) > held[2] + self.push_margin:
+                    first = y
+                    self.stats.pushed += 1
+            if first is not None:
+                kept[pair] = first
+                out[q] = first == pair[0]
+        self._pushed = kept
+        return out
+
+    def _note_yields(self, live: List[str], hold: Dict[int, int], to_target: Dict[str, float],
+                     before: Dict[str, Tuple[str, int, float]]) -> None:
+        """Remember, per agent held for another (``hold``: indices into ``live``), that one, its own target
+        index and its distance to its target when it began to yield for them (``before``: the last step's)."""
+        now: Dict[str, Tuple[str, int, float]] = {}
+        for y, w in hold.items():
+            a, b = live[y], live[w]
+            held = before.get(a)
+            now[a] = held if held is not None and held[:2] == (b, self.index[a]) else \
+                (b, self.index[a], to_target.get(a, math.inf))
+        self._yielding = now
 
 
 __all__ = ["GoalClearance", "pair_proximity"]

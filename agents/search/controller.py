@@ -24,15 +24,14 @@ current waypoint's observation. Rules, all from observations only:
   its goal stands still while another agent free to leave stands by that goal (parked, it would
   shut that one in); the one it holds for no longer waits for it by the plan's or goal order;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
-  with the lower priority stands still (priority: the agent further behind its plan goes
-  first, ties broken by index; with ``goal_clearance``, where one of them stands within it of
-  the goal the other is on its way to, the one nearer the other's goal goes first); the paper
-  states this rule, we implement it. Only two agents
-  that would both move yield to each other: one that already stands still (at its waypoint,
-  waiting for its departure time or for an agent the plan sends first) is passed. Otherwise an
-  agent that waits for a neighbour to go first can have priority over it, the neighbour yields
-  to the agent that waits for it, and neither moves until ``order_patience`` runs out, again at
-  every waypoint;
+  with the lower priority stands still (priority: the agent further behind its plan goes first,
+  ties broken by index; with ``goal_clearance``, of two where one stands within it of the goal
+  the other is on its way to, the one nearer that goal; with ``push_margin``, one held still
+  that the other pushes away from its target); the paper states this rule, we implement it.
+  Only two agents that would both move yield to each other: one that already stands still (at
+  its waypoint, waiting for its departure time or for an agent the plan sends first) is passed.
+  Otherwise an agent waiting for a neighbour to go first can have priority over it, and neither
+  moves until ``order_patience`` runs out, again at every waypoint;
 - **unstick**: an agent that was free to move but whose observation has hardly changed over
   ``stuck_window`` steps (pressed against furniture, or two agents pushing against each
   other), or (optional) that came no closer to its target for ``progress_patience`` steps (it
@@ -95,6 +94,8 @@ class AgentPlan:
 class ControllerStats:
     steps: int = 0
     yields: int = 0
+    #: pairs whose yield order flipped because the agent held still was pushed (``push_margin``)
+    pushed: int = 0
     waits: int = 0
     replans: int = 0
     escapes: int = 0
@@ -146,22 +147,19 @@ class WaypointController(GoalClearance):
             (``None``: replan only when stuck).
         stuck_window: steps over which an agent free to move counts as stuck when its
             observation changed by less than ``stuck_tolerance`` (``None`` disables unsticking).
-        stuck_tolerance: mean absolute change of the observation over ``stuck_window`` steps,
-            in the observation's own scale (``uint8`` images divided by 255): below it the agent
-            is stuck. On the apartments one step (0.25 m) changes a panorama by about 0.05 and
-            the jitter of an agent pressed against a wall by under 0.01; on the 2D maps
-            (positions divided by the world size) 0.01 is half a unit a step on a 55-unit map.
+        stuck_tolerance: mean absolute change of the observation over ``stuck_window`` steps
+            (``uint8`` images divided by 255) below which the agent is stuck. On the apartments a
+            step (0.25 m) changes a panorama by about 0.05, the jitter of an agent pressed against
+            a wall by under 0.01; on the 2D maps 0.01 is half a unit a step on a 55-unit map.
         escape_steps: escape actions an agent takes once it is found stuck (doubled for every
             further time it is stuck on the way to the same target, up to 8 times as many).
         escape: ``"random"``: uniform random actions; ``"sidestep"``: the policy's action turned
-            by a right angle at full speed, turned left and right in turn from one escape to the
-            next (a policy that pushes into an obstacle it does not see as one, such as another
-            agent parked on its way, moves out of line with it; a random walk of a few steps
-            hardly moves it); a random direction where the policy's action is about zero.
+            by a right angle at full speed, left and right in turn from one escape to the next (a
+            policy that pushes into an obstacle it does not see, such as an agent parked on its
+            way, moves out of line with it); a random direction where the action is about zero.
         sidestep_after: with ``escape="random"``, an agent found stuck more than this many times
-            in the episode sidesteps from then on (``None``: never): agents stuck now and then
-            keep their random escapes, one pressed against furniture again and again gets out
-            of line with it.
+            in the episode sidesteps from then on (``None``: never): one pressed against furniture
+            again and again gets out of line with it.
         skip_after: times an agent may be stuck on the way to one target before it replans
             (or, without ``replan``, heads for the next waypoint).
         seed: seed of the escape actions.
@@ -169,15 +167,13 @@ class WaypointController(GoalClearance):
             on does not progress (no new target reached) before it stops waiting on it.
         progress_patience: an agent free to move that comes no closer to its target (by the
             critic, by a quarter step) for this many steps counts as stuck, too (``None``: off): a
-            policy that mistakes one place for another (two panoramas alike) drives or hovers
-            somewhere else and never stops long enough for ``stuck_window`` to see it.
+            policy that takes one place for another never stops long enough for ``stuck_window``.
         goal_order: optional ``goal_order(agent) -> [(other, r), ...]``, asked while ``agent``
             stands at its last waypoint: it sets off for its goal only once each ``other`` has
             reached its target ``r`` (or arrived), since ``other``'s route passes ``agent``'s
-            goal. Asked afresh at every step (routes change when agents replan); an agent waits
-            on another for at most ``order_patience`` steps in which that one makes no progress.
-            An agent it holds this way no longer waits for it by the plan's order.
-        goal_clearance: see *clear goal* above (predicted steps; ``None``: off).
+            goal. Asked afresh at every step (routes change when agents replan); waits as long as
+            ``order_patience`` allows. An agent it holds so no longer waits for it by the plan's order.
+        goal_clearance, push_margin: see *clear goal* and *yield* above (predicted steps; ``None``: off).
     """
 
     def __init__(
@@ -205,6 +201,7 @@ class WaypointController(GoalClearance):
         goal_order: Optional[Callable[[str], List[Tuple[str, int]]]] = None,
         goal_clearance: Optional[float] = None,
         sidestep_after: Optional[int] = None,
+        push_margin: Optional[float] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -263,9 +260,12 @@ class WaypointController(GoalClearance):
         self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
         #: agent -> the agent it holds its parking for (goal order), as of its last check
         self._parks_after: Dict[str, str] = {}
-        if goal_clearance is not None and not goal_clearance > 0:
-            raise ValueError(f"goal_clearance must be > 0 or None, got {goal_clearance!r}")
-        self.goal_clearance = goal_clearance
+        for name, v in (("goal_clearance", goal_clearance), ("push_margin", push_margin)):
+            if v is not None and not v > 0:
+                raise ValueError(f"{name} must be > 0 or None, got {v!r}")
+        self.goal_clearance, self.push_margin = goal_clearance, push_margin
+        self._yielding: Dict[str, Tuple[str, int, float]] = {}
+        self._pushed: Dict[Tuple[str, str], str] = {}
         #: agent -> the agent it stands still for to clear its goal (as of the last step); per pair,
         #: the step it began; per agent, those it no longer waits on (its patience ran out)
         self._clearing: Dict[str, str] = {}
@@ -427,7 +427,7 @@ class WaypointController(GoalClearance):
         if self.goal_clearance is not None and len(live) > 1:
             self._clear_goals(live, obs, hold, reason, to_target)
         if self.safety_radius is not None and len(live) > 1:
-            yielders = self._yield_mask(live, obs, ~hold)
+            yielders = self._yield_mask(live, obs, ~hold, to_target)
             for i, w in yielders.items():
                 if not hold[i]:
                     reason[i] = f"yield:{live[w]}"
@@ -562,10 +562,12 @@ class WaypointController(GoalClearance):
             self._escape_action[agent] = step
         return step.astype(np.asarray(action).dtype, copy=True)
 
-    def _yield_mask(self, live: List[str], obs: np.ndarray, moving: np.ndarray) -> Dict[int, int]:
+    def _yield_mask(self, live: List[str], obs: np.ndarray, moving: np.ndarray,
+                    to_target: Dict[str, float]) -> Dict[int, int]:
         """The agents (indices into ``live``) that yield on this step, each to the agent it yields to;
         only pairs of agents that would both move (``moving``) yield."""
         before, self._goal_priority = self._goal_priority, {}
+        pushed, yielding, self._pushed, self._yielding = self._pushed, self._yielding, {}, {}
         ii, jj = np.triu_indices(len(live), 1)
         both = moving[ii] & moving[jj]
         ii, jj = ii[both], jj[both]
@@ -580,6 +582,8 @@ class WaypointController(GoalClearance):
         i_first = (lag[ii] > lag[jj]) | ((lag[ii] == lag[jj]) & (ii < jj))
         if self.goal_clearance is not None:
             i_first = self._goal_first(live, obs, ii, jj, close, i_first, before)
+        if self.push_margin is not None:
+            i_first = self._push_first(live, ii, jj, close, i_first, to_target, pushed, yielding)
         loser = np.where(i_first, jj, ii)[close]
         winner = np.where(i_first, ii, jj)[close]
         hold: Dict[int, int] = {}
@@ -588,6 +592,8 @@ class WaypointController(GoalClearance):
             if w not in hold and yielder not in hold:
                 hold[yielder] = w
         self.stats.yields += len(hold)
+        if self.push_margin is not None:
+            self._note_yields(live, hold, to_target, yielding)
         return hold
 
 

@@ -495,3 +495,34 @@ def test_with_goal_clearance_the_agent_by_the_others_goal_goes_first_and_keeps_i
 def test_goal_clearance_is_checked():
     with pytest.raises(ValueError, match="goal_clearance must be"):
         WaypointController(straight_policy, euclid_steps, {}, goal_clearance=0.0)
+
+
+def test_with_push_margin_an_agent_pushed_while_it_yields_goes_first_and_keeps_its_priority():
+    """agent_1 yields to agent_0 (by index) and is pushed away from its goal: once its distance to the goal has
+    grown by more than push_margin while it yields, agent_0 yields instead; the pair keeps that order while
+    close, and is forgotten once apart. Without the rule agent_1 stays held however far it is pushed."""
+    def controller(margin):
+        plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), np.array([40, 5], np.float32) / SIZE),
+                 "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array([10, 5], np.float32) / SIZE)}
+        return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
+                                  stuck_window=None, push_margin=margin)
+
+    def step(ctrl, p0, p1):
+        ctrl.act({"agent_0": np.array(p0, np.float32) / SIZE, "agent_1": np.array(p1, np.float32) / SIZE})
+        return ctrl.stats.holding
+
+    plain, ctrl = controller(None), controller(1.0)
+    for c in (plain, ctrl):
+        assert step(c, (18, 5), (20, 5)) == {"agent_0": None, "agent_1": "yield:agent_0"}
+        assert step(c, (18.8, 5), (20.8, 5))["agent_1"] == "yield:agent_0"  # pushed 0.8: within the margin
+    assert step(plain, (19.5, 5), (21.5, 5))["agent_1"] == "yield:agent_0"
+    assert step(ctrl, (19.5, 5), (21.5, 5)) == {"agent_0": "yield:agent_1", "agent_1": None}
+    assert ctrl.stats.pushed == 1
+    assert step(ctrl, (19.0, 5), (20.5, 5)) == {"agent_0": "yield:agent_1", "agent_1": None}  # kept while close
+    step(ctrl, (5, 5), (30, 5))  # apart: the pair is forgotten
+    assert step(ctrl, (18, 5), (20, 5))["agent_1"] == "yield:agent_0"
+
+
+def test_push_margin_is_checked():
+    with pytest.raises(ValueError, match="push_margin must be"):
+        WaypointController(straight_policy, euclid_steps, {}, push_margin=-1.0)
