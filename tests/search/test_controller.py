@@ -469,18 +469,25 @@ def test_an_agent_the_plan_holds_for_the_parking_one_goes_first_when_that_one_cl
     assert gap >= 3.0 and arrived["agent_0"] < 40 and "agent_1" in arrived  # agent_1 had left: no patience spent
 
 
+def two_on_last_legs(goal0, goal1, **kw):
+    """A controller of two agents with no waypoints left, heading for goals at x = ``goal0`` / ``goal1``, y = 5."""
+    plans = {a: AgentPlan(np.zeros((0, 2), np.float32), np.array([g, 5], np.float32) / SIZE)
+             for a, g in (("agent_0", goal0), ("agent_1", goal1))}
+    return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
+                              stuck_window=None, **kw)
+
+
+def step(ctrl, p0, p1):
+    """One scripted step with the two agents at ``p0`` and ``p1``; who held still, and why."""
+    ctrl.act({"agent_0": np.array(p0, np.float32) / SIZE, "agent_1": np.array(p1, np.float32) / SIZE})
+    return ctrl.stats.holding
+
+
 def test_with_goal_clearance_the_agent_by_the_others_goal_goes_first_and_keeps_its_priority():
     """Two close agents on their last legs, agent_1 half a unit from agent_0's goal: agent_0 yields
     (without the rule agent_1 would, by index). Pushed about, the pair keeps that order while close."""
     def controller(clearance):
-        plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), np.array([18, 5], np.float32) / SIZE),
-                 "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array([40, 5], np.float32) / SIZE)}
-        return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
-                                  stuck_window=None, goal_clearance=clearance)
-
-    def step(ctrl, p0, p1):
-        ctrl.act({"agent_0": np.array(p0, np.float32) / SIZE, "agent_1": np.array(p1, np.float32) / SIZE})
-        return ctrl.stats.holding
+        return two_on_last_legs(18, 40, goal_clearance=clearance)
 
     assert step(controller(None), (16, 5), (17.5, 5)) == {"agent_0": None, "agent_1": "yield:agent_0"}
     ctrl = controller(3.0)
@@ -501,17 +508,7 @@ def test_with_push_margin_an_agent_pushed_while_it_yields_goes_first_and_keeps_i
     """agent_1 yields to agent_0 (by index) and is pushed away from its goal: once its distance to the goal has
     grown by more than push_margin while it yields, agent_0 yields instead; the pair keeps that order while
     close, and is forgotten once apart. Without the rule agent_1 stays held however far it is pushed."""
-    def controller(margin):
-        plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), np.array([40, 5], np.float32) / SIZE),
-                 "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array([10, 5], np.float32) / SIZE)}
-        return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
-                                  stuck_window=None, push_margin=margin)
-
-    def step(ctrl, p0, p1):
-        ctrl.act({"agent_0": np.array(p0, np.float32) / SIZE, "agent_1": np.array(p1, np.float32) / SIZE})
-        return ctrl.stats.holding
-
-    plain, ctrl = controller(None), controller(1.0)
+    plain, ctrl = two_on_last_legs(40, 10, push_margin=None), two_on_last_legs(40, 10, push_margin=1.0)
     for c in (plain, ctrl):
         assert step(c, (18, 5), (20, 5)) == {"agent_0": None, "agent_1": "yield:agent_0"}
         assert step(c, (18.8, 5), (20.8, 5))["agent_1"] == "yield:agent_0"  # pushed 0.8: within the margin
