@@ -171,8 +171,11 @@ class GoalClearance:
         for y, w in hold.items():
             a, b = live[y], live[w]
             held = before.get(a)
-            now[a] = held if held is not None and held[:2] == (b, self.index[a]) else \
-                (b, self.index[a], to_target.get(a, math.inf))
+            # kept while it yields to the same agent for the same target; an agent that only set off for
+            # its target on this step has no distance to it yet (inf), and takes the next step's
+            if held is None or held[:2] != (b, self.index[a]) or not math.isfinite(held[2]):
+                held = (b, self.index[a], to_target.get(a, math.inf))
+            now[a] = held
         self._yielding = now
 
 
