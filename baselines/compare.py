@@ -10,7 +10,7 @@ gains and losses whether it moved arrivals beyond the few that any such change f
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -35,10 +35,11 @@ class CellComparison:
     cost_before: List[float] = field(default_factory=list)
     cost_after: List[float] = field(default_factory=list)
 
-    def add(self, before: Mapping[str, str], after: Mapping[str, str]) -> None:
-        """Pair one problem's row of each evaluation (``runs.csv`` rows)."""
+    def add(self, before: Mapping[str, Any], after: Mapping[str, Any]) -> None:
+        """Pair one problem's row of each evaluation (``runs.csv`` rows as
+        :func:`baselines.output.read_rows` reads them)."""
         problem = int(before["problem"])
-        a, b = _arrived(before), _arrived(after)
+        a, b = bool(before["success"]), bool(after["success"])
         self.runs += 1
         self.arrived_before += a
         self.arrived_after += b
@@ -52,22 +53,19 @@ class CellComparison:
         self.unchanged += a == b and all(before.get(k) == after.get(k) for k in ("cost_max", "steps"))
 
 
-def _arrived(row: Mapping[str, str]) -> bool:
-    return str(row["success"]).strip().lower() in ("true", "1")
-
-
-def _cell(row: Mapping[str, str]) -> Cell:
+def _cell(row: Mapping[str, Any]) -> Cell:
     return row["method"], int(row["agents"]), row["difficulty"]
 
 
-def pair_runs(before: Iterable[Mapping[str, str]], after: Iterable[Mapping[str, str]]) -> List[CellComparison]:
-    """Pair the rows of two evaluations (``runs.csv`` rows) by (method, agents, difficulty, problem).
+def pair_runs(before: Iterable[Mapping[str, Any]], after: Iterable[Mapping[str, Any]]) -> List[CellComparison]:
+    """Pair the rows of two evaluations (``runs.csv`` rows as :func:`baselines.output.read_rows`
+    reads them) by (method, agents, difficulty, problem).
 
     Only problems present in both count. ``ValueError`` when none is, or when a problem appears
     twice in one evaluation (two folders of the same apartment given as one evaluation, say).
     """
-    def index(rows: Iterable[Mapping[str, str]], what: str) -> Dict[Tuple[Cell, int], Mapping[str, str]]:
-        out: Dict[Tuple[Cell, int], Mapping[str, str]] = {}
+    def index(rows: Iterable[Mapping[str, Any]], what: str) -> Dict[Tuple[Cell, int], Mapping[str, Any]]:
+        out: Dict[Tuple[Cell, int], Mapping[str, Any]] = {}
         for r in rows:
             key = (_cell(r), int(r["problem"]))
             if key in out:

@@ -9,20 +9,19 @@ in the same order); each folder's ``runs.csv`` is paired with its counterpart pr
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 from pathlib import Path
-from typing import Dict, List
+from typing import Any, Dict, List
 
 from baselines.compare import comparison_table, merge, pair_runs
+from baselines.output import read_rows
 
 
-def read_rows(folder: Path) -> List[Dict[str, str]]:
+def runs_of(folder: Path) -> List[Dict[str, Any]]:
     path = folder / "runs.csv"
     if not path.is_file():
         raise SystemExit(f"error: {path} does not exist (run safe-mapf evaluate --out {folder} first)")
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+    return read_rows(path)
 
 
 def main(argv=None) -> int:
@@ -38,7 +37,7 @@ def main(argv=None) -> int:
         p.error(f"--resamples must be >= 1, got {args.resamples}")
     every = []
     for before, after in zip(args.before, args.after):
-        rows = [[r for r in read_rows(f) if args.methods is None or r["method"] in args.methods]
+        rows = [[r for r in runs_of(f) if args.methods is None or r["method"] in args.methods]
                 for f in (before, after)]
         try:
             cells = pair_runs(*rows)

@@ -12,9 +12,9 @@ FIELDS = ["method", "agents", "difficulty", "problem", "success", "cost_max", "s
 
 
 def rows(outcomes, method="ours", agents=5, difficulty="hard"):
-    """runs.csv rows: one per (success, cost, steps), problems 0, 1, ..."""
-    return [{"method": method, "agents": str(agents), "difficulty": difficulty, "problem": str(i),
-             "success": str(ok), "cost_max": str(c), "steps": str(s)} for i, (ok, c, s) in enumerate(outcomes)]
+    """runs.csv rows as baselines.output.read_rows reads them: one per (success, cost, steps), problems 0, 1, ..."""
+    return [{"method": method, "agents": agents, "difficulty": difficulty, "problem": i, "success": ok,
+             "cost_max": c, "steps": s} for i, (ok, c, s) in enumerate(outcomes)]
 
 
 def test_runs_are_paired_by_problem_into_gains_losses_and_cost_changes():
