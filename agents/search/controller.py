@@ -7,7 +7,8 @@ current waypoint's observation. Rules, all from observations only:
   one falls below its threshold (closed loop), and to its final goal after the last one. The
   threshold is ``reach_threshold``, raised for a waypoint whose own distance to itself (a
   learned distance is not zero there) plus ``self_margin`` is larger: an agent standing on
-  such a waypoint would otherwise never see it reached;
+  such a waypoint would otherwise never see it reached; with ``advance_slack``, only where it is
+  about as near its next target as the waypoint is (:mod:`agents.search.advance`);
 - **plan time**: an agent does not leave waypoint ``k`` before the plan's departure time from
   it (so CBS's waits happen in the environment, too);
 - **plan order** (optional, instead of plan time): an agent does not set off for a target before
@@ -58,6 +59,7 @@ from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .advance import AdvanceRules
 from .clearance import GoalClearance, pair_proximity
 
 PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -101,6 +103,8 @@ class ControllerStats:
     escapes: int = 0
     skips: int = 0
     settled: int = 0
+    #: advances the on course test held back (``advance_slack``)
+    off_course: int = 0
     fallbacks: int = 0
     fallback_steps: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
@@ -114,7 +118,7 @@ class ControllerStats:
     leg_escapes: Dict[str, int] = field(default_factory=dict)
 
 
-class WaypointController(GoalClearance):
+class WaypointController(GoalClearance, AdvanceRules):
     """Turns per-agent plans into actions, one environment step at a time.
 
     Args:
@@ -174,6 +178,7 @@ class WaypointController(GoalClearance):
             goal. Asked afresh at every step (routes change when agents replan); waits as long as
             ``order_patience`` allows. An agent it holds so no longer waits for it by the plan's order.
         goal_clearance, push_margin: see *clear goal* and *yield* above (predicted steps; ``None``: off).
+        advance_slack: see *advance* above (predicted steps; ``None``: off).
     """
 
     def __init__(
@@ -202,6 +207,7 @@ class WaypointController(GoalClearance):
         goal_clearance: Optional[float] = None,
         sidestep_after: Optional[int] = None,
         push_margin: Optional[float] = None,
+        advance_slack: Optional[float] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -263,7 +269,11 @@ class WaypointController(GoalClearance):
         for name, v in (("goal_clearance", goal_clearance), ("push_margin", push_margin)):
             if v is not None and not v > 0:
                 raise ValueError(f"{name} must be > 0 or None, got {v!r}")
-        self.goal_clearance, self.push_margin = goal_clearance, push_margin
+        if advance_slack is not None and not advance_slack >= 0:
+            raise ValueError(f"advance_slack must be >= 0 or None, got {advance_slack!r}")
+        self.goal_clearance, self.push_margin, self.advance_slack = goal_clearance, push_margin, advance_slack
+        self._onward: Dict[str, Tuple[AgentPlan, np.ndarray]] = {}
+        self._approach: Dict[str, Tuple[int, float, int]] = {}
         self._yielding: Dict[str, Tuple[str, int, float]] = {}
         self._pushed: Dict[Tuple[str, str], str] = {}
         #: agent -> the agent it stands still for to clear its goal (as of the last step); per pair,
@@ -282,37 +292,6 @@ class WaypointController(GoalClearance):
         plan = self.plans[agent]
         k = self.index[agent]
         return plan.waypoints[k] if k < len(plan.waypoints) else plan.goal
-
-    def _reach_thresholds(self, plan: AgentPlan) -> np.ndarray:
-        """Per waypoint of ``plan``: the predicted distance below which it counts as reached."""
-        k = len(plan.waypoints)
-        thr = np.full(k, self.reach_threshold)
-        if self.self_margin is not None and k:
-            wps = np.asarray(plan.waypoints)
-            own = np.asarray(self.distance(wps, wps), dtype=np.float64).reshape(k)
-            thr = np.maximum(thr, own + self.self_margin)
-        return thr
-
-    def reach_threshold_of(self, agent: str) -> float:
-        """The threshold below which ``agent``'s current waypoint counts as reached (``inf`` past the last)."""
-        k = self.index[agent]
-        thr = self._thresholds[agent]
-        return float(thr[k]) if k < len(thr) else math.inf
-
-    def _settled(self, agent: str, k: int, d: float) -> bool:
-        """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it is within
-        ``settle_slack`` of the threshold and has not come closer for ``settle_patience`` steps (an
-        agent pressed against a wall with the waypoint behind it reads far, and is not settled)."""
-        if self.settle_patience is None or not math.isfinite(d):
-            return False
-        best = self._progress.get(agent)
-        if best is None or best[0] != k or d < best[1] - 0.25:  # a new target, or closer by a quarter step
-            self._progress[agent] = best = (k, d, self.t)
-        near = self._thresholds[agent][k] + self.settle_slack
-        if d < near and best[1] < near and self.t - best[2] >= self.settle_patience:
-            self.stats.settled += 1
-            return True
-        return False
 
     def _lag(self, agent: str) -> int:
         plan = self.plans[agent]
@@ -382,7 +361,8 @@ class WaypointController(GoalClearance):
                 to_target[a] = float(d[i])
                 if k >= len(plan.waypoints):
                     continue
-                if d[i] < self._thresholds[a][k] or self._settled(a, k, float(d[i])):
+                if (d[i] < self._thresholds[a][k] and (d[i] == -np.inf or self._on_course(a, k, obs[i], float(d[i])))
+                        or self._settled(a, k, float(d[i]))):
                     if plan.depart_times is not None and self.t < int(plan.depart_times[k]):
                         continue
                     other = self._waits_on(a, k + 1)

@@ -242,6 +242,69 @@ def test_an_agent_hovering_beside_its_waypoint_moves_on_after_the_settle_patienc
     assert ctrl.index["agent_0"] == 0 and ctrl.stats.settled == 0
 
 
+def on_course_run(slack, limit=120):
+    """An approach waypoint (17, 12) inside a wide reach threshold (16) of the start (14, 27): from the
+    start, heading for the goal (45, 12) runs into the central block; from the waypoint it does not.
+    Returns the controller, the trail and where the agent stood when it set off for the goal."""
+    env = make_env([(14.0, 27.0)], [(45.0, 12.0)])
+    wp = np.array([[17.0, 12.0]], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(wp, np.array([45, 12], np.float32) / SIZE)},
+                              reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=slack)
+    obs, infos = env.reset(options=env._pinned)
+    trail, turned = [infos["agent_0"]["position"]], None
+    while env.agents and ctrl.t < limit:
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        if turned is None and ctrl.index["agent_0"] == 1:
+            turned = trail[-1]
+        obs, _, _, _, infos = env.step(actions)
+        trail += [infos[a]["position"] for a in infos]
+    return ctrl, np.array(trail), turned
+
+
+def test_a_waypoint_counts_as_reached_only_where_the_agent_is_about_as_near_its_next_target():
+    def hits_the_block(trail):
+        return trail[np.flatnonzero((trail[:, 0] > 19.0) & (trail[:, 0] < 37.0)), 1].max() > 19.0
+
+    ctrl, trail, turned = on_course_run(None)
+    assert np.allclose(turned, [14, 27])  # it turned for the goal at once, from the start
+    assert ctrl.stats.off_course == 0 and hits_the_block(trail)
+    for slack in (0.0, 1.0):
+        ctrl, trail, turned = on_course_run(slack)
+        assert np.linalg.norm(trail[-1] - [45, 12]) <= 1.0  # it arrived
+        assert ctrl.stats.off_course > 0
+        # it set off for the goal only about as near it as the waypoint is (28 units), not before
+        assert 28.0 + slack - 1.0 < np.linalg.norm(turned - [45, 12]) <= 28.0 + slack + 1e-3
+        assert not hits_the_block(trail)  # it stayed below the block all the way to the goal
+    with pytest.raises(ValueError, match="advance_slack must be"):
+        on_course_run(-1.0)
+
+
+def test_the_on_course_test_holds_an_agent_only_while_it_closes_in_on_its_waypoint():
+    """A policy that stops 2 units short of the waypoint (20, 5), on the far side from the goal
+    (40, 5), never gets as near the goal as the waypoint: once it comes no closer it moves on, two
+    steps later, long before it would settle (``settle_patience``) or count as stuck."""
+    wp = np.array([[20.0, 5.0]], np.float32) / SIZE
+    goal = np.array([40, 5], np.float32) / SIZE
+    env = make_env([(5.0, 5.0)], [(40.0, 5.0)])
+    ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+                              reach_threshold=3.0, settle_patience=10, advance_slack=0.0,
+                              safety_radius=None, stuck_window=4)
+    obs, infos = env.reset(options=env._pinned)
+    held = moved_on = None
+    while env.agents and ctrl.t < 80:
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        if held is None and ctrl.stats.off_course:
+            held = ctrl.t
+        if moved_on is None and ctrl.index["agent_0"] == 1:
+            moved_on, escapes = ctrl.t, ctrl.stats.escapes
+        obs, _, _, _, infos = env.step(actions)
+    assert held is not None and moved_on is not None
+    assert 0 < moved_on - held <= 4
+    assert ctrl.stats.settled == 0 and escapes == 0
+    assert infos["agent_0"]["position"][0] > 30.0  # it went on towards the goal (and stops short of it)
+
+
 def refuser(obs, goal):
     """A policy that will not move (a constrained policy refusing a goal beside furniture)."""
     return np.zeros((len(obs), 2), np.float32)
