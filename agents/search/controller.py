@@ -8,7 +8,8 @@ current waypoint's observation. Rules, all from observations only:
   threshold is ``reach_threshold``, raised for a waypoint whose own distance to itself (a
   learned distance is not zero there) plus ``self_margin`` is larger: an agent standing on
   such a waypoint would otherwise never see it reached; with ``advance_slack``, only where it is
-  about as near its next target as the waypoint is (:mod:`agents.search.advance`);
+  about as near its next target as the waypoint is, or no longer closes in on the waypoint
+  (:mod:`agents.search.advance`);
 - **plan time**: an agent does not leave waypoint ``k`` before the plan's departure time from
   it (so CBS's waits happen in the environment, too);
 - **plan order** (optional, instead of plan time): an agent does not set off for a target before
