@@ -66,15 +66,22 @@ class AdvanceRules:
         thr = self._thresholds[agent]
         return float(thr[k]) if k < len(thr) else math.inf
 
+    def _closest(self, store: Dict[str, Tuple[int, float, int]], agent: str, k: int,
+                 d: float) -> Tuple[int, float, int]:
+        """``agent``'s closest predicted approach to waypoint ``k`` as kept in ``store``: (``k``, that
+        distance, the step it came that close), begun anew for a new waypoint or one closer by a quarter step."""
+        best = store.get(agent)
+        if best is None or best[0] != k or d < best[1] - 0.25:
+            store[agent] = best = (k, d, self.t)
+        return best
+
     def _settled(self, agent: str, k: int, d: float) -> bool:
         """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it is within
         ``settle_slack`` of the threshold and has not come closer for ``settle_patience`` steps (an
         agent pressed against a wall with the waypoint behind it reads far, and is not settled)."""
         if self.settle_patience is None or not math.isfinite(d):
             return False
-        best = self._progress.get(agent)
-        if best is None or best[0] != k or d < best[1] - 0.25:  # a new target, or closer by a quarter step
-            self._progress[agent] = best = (k, d, self.t)
+        best = self._closest(self._progress, agent, k, d)
         near = self._thresholds[agent][k] + self.settle_slack
         if d < near and best[1] < near and self.t - best[2] >= self.settle_patience:
             self.stats.settled += 1
@@ -97,10 +104,7 @@ class AdvanceRules:
         without ``advance_slack``)."""
         if self.advance_slack is None:
             return True
-        best = self._approach.get(agent)
-        if best is None or best[0] != k or d < best[1] - 0.25:  # a new waypoint, or closer by a quarter step
-            self._approach[agent] = best = (k, d, self.t)
-        elif self.t - best[2] >= 2:  # no closer for two steps: the test holds it no longer
+        if self.t - self._closest(self._approach, agent, k, d)[2] >= 2:  # no closer for two steps: held no longer
             return True
         plan = self.plans[agent]
         nxt = plan.waypoints[k + 1] if k + 1 < len(plan.waypoints) else plan.goal
