@@ -450,6 +450,7 @@ class WaypointController(GoalClearance, AdvanceRules):
             self._at_start[agent] = plan.starts_at_first and len(plan.waypoints) > 0
             self._thresholds[agent] = self._reach_thresholds(plan)
             self._progress.pop(agent, None)
+            self._approach.pop(agent, None)
             self._stuck_count[agent] = 0
             self.stats.leg_escapes[agent] = 0
 

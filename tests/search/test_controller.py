@@ -280,6 +280,31 @@ def test_a_waypoint_counts_as_reached_only_where_the_agent_is_about_as_near_its_
         on_course_run(-1.0)
 
 
+def test_a_new_plan_starts_the_on_course_test_afresh():
+    """Replanned while it closes in on the waypoint (14, 20), the agent holds for the new plan's
+    waypoint (17, 12) as for any: the closest approach it made to the old waypoint, at the same
+    index, does not count as having stopped closing in on the new one."""
+    env = make_env([(14.0, 27.0)], [(45.0, 12.0)])
+    goal = np.array([45, 12], np.float32) / SIZE
+    ctrl = WaypointController(straight_policy, euclid_steps,
+                              {"agent_0": AgentPlan(np.array([[14.0, 20.0]], np.float32) / SIZE, goal)},
+                              reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=0.0)
+    obs, infos = env.reset(options=env._pinned)
+    trail, replanned, turned = [infos["agent_0"]["position"]], False, None
+    while env.agents and ctrl.t < 120:
+        if not replanned and trail[-1][1] <= 22.5:
+            ctrl.set_plan("agent_0", AgentPlan(np.array([[17.0, 12.0]], np.float32) / SIZE, goal))
+            replanned = True
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        if turned is None and ctrl.index["agent_0"] == 1:
+            turned = trail[-1]
+        obs, _, _, _, infos = env.step(actions)
+        trail += [infos[a]["position"] for a in infos]
+    assert replanned and turned is not None
+    assert np.linalg.norm(turned - [45, 12]) <= 28.0 + 1e-3  # as near the goal as the new waypoint
+    assert np.linalg.norm(trail[-1] - [45, 12]) <= 1.0
+
+
 def test_the_on_course_test_holds_an_agent_only_while_it_closes_in_on_its_waypoint():
     """A policy that stops 2 units short of the waypoint (20, 5), on the far side from the goal
     (40, 5), never gets as near the goal as the waypoint: once it comes no closer it moves on, two
