@@ -476,6 +476,7 @@ def build_problem_graph(
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
     avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0, cost_guard: Optional[float] = 2.0,
+    detour: Optional[float] = None,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
     attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
@@ -491,7 +492,8 @@ def build_problem_graph(
     there): an edge ``u -> v`` is left out when going through one of them is at most
     ``avoid_slack`` longer, ``D[u, o] + D[o, v] <= D[u, v] + avoid_slack``. An agent whose shortest
     route the cut-off made more than ``cost_guard`` times as costly by the critic as its shortest
-    route without it gets that route too (:func:`admit_cheaper_routes`; ``None``: never).
+    route without it gets that route too (:func:`admit_cheaper_routes`; ``None``: never), and so does one
+    whose route the cut-off made more than ``detour`` times as long and costlier at all.
     ``detached`` lists buffer nodes no start may link to directly (an agent that failed to reach them
     from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
@@ -534,7 +536,7 @@ def build_problem_graph(
     ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee,
                                     allowed=allowed)
     if cost_guard is not None and math.isfinite(c_max):
-        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, allowed=allowed)
+        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, detour=detour, allowed=allowed)
     graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 

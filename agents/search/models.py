@@ -7,7 +7,7 @@ suit the model's observations (vectors or panoramas). This module does not impor
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, Mapping
+from typing import Any, Callable, Dict, Mapping, Optional
 
 import numpy as np
 
@@ -151,6 +151,25 @@ def default_controller_options(model: Any) -> Dict[str, Any]:
     """:data:`PANORAMA_CONTROLLER_OPTIONS` for a model of image observations, else none (the
     controller's defaults: the plain reach threshold)."""
     return dict(PANORAMA_CONTROLLER_OPTIONS) if _reads_images(model) else {}
-__all__ = ["DistanceFn", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_REACH_THRESHOLD", "PolicyFn", "REACH_THRESHOLD",
-           "buffer_observations", "check_models", "default_controller_options", "default_hold",
+
+
+#: :class:`~agents.search.planner.BufferPlanner`'s ``detour`` for agents of panoramas
+PANORAMA_DETOUR = 1.5
+
+
+def default_detour(model: Any) -> Optional[float]:
+    """:data:`PANORAMA_DETOUR` for a model of image observations, else ``None`` (off).
+
+    On panoramas the cost cut-off sends agents on detours longer and costlier than their plain
+    routes, and admitting the plain route where it is trusted
+    (:func:`~agents.search.pruning.trusted_edges`) lowers the cost at no loss (validation problems
+    of the four apartments, 1200 runs: 1188 -> 1189 arrived, mean largest cost 47.51 -> 47.15).
+    Vector agents' tables were made without it.
+    """
+    return PANORAMA_DETOUR if _reads_images(model) else None
+
+
+__all__ = ["DistanceFn", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_DETOUR", "PANORAMA_REACH_THRESHOLD", "PolicyFn",
+           "REACH_THRESHOLD", "buffer_observations", "check_models", "default_controller_options", "default_detour",
+           "default_hold",
            "default_reach_threshold", "distance_fn", "env_observations", "policy_fn"]

@@ -60,6 +60,7 @@ from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
 from .mapf.pibt import solve_pibt
 from .mapf.prioritized import solve_prioritized
+from .models import default_detour
 from .pruning import route_from_predecessors
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
@@ -280,6 +281,10 @@ class BufferPlanner:
             many times as costly as its shortest route without the cut-off, that route is admitted
             too (:func:`~agents.search.pruning.admit_cheaper_routes`): no agent is sent the long way
             round to a far higher cost (``None``: off).
+        detour: where ``c_max`` leaves an agent only a route more than this many times as long as
+            its shortest route without the cut-off, and costlier by the critic at all, that route is
+            admitted too: longer and costlier buys nothing (``None``: off, the default;
+            :meth:`from_agent` turns it on for agents of panoramas, :func:`~agents.search.models.default_detour`).
     """
 
     def __init__(
@@ -307,6 +312,7 @@ class BufferPlanner:
         budget_labels: int = 2_000,
         max_edges: Optional[int] = None,
         cost_guard: Optional[float] = 2.0,
+        detour: Optional[float] = None,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -364,6 +370,9 @@ class BufferPlanner:
         if cost_guard is not None and not cost_guard >= 1.0:
             raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
         self.cost_guard = None if cost_guard is None else float(cost_guard)
+        if detour is not None and not detour >= 1.0:
+            raise ValueError(f"detour must be >= 1 or None, got {detour!r}")
+        self.detour = None if detour is None else float(detour)
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
@@ -380,8 +389,10 @@ class BufferPlanner:
 
     @classmethod
     def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max", **kwargs) -> "BufferPlanner":
-        """Compute ``D`` and ``C`` with ``agent.pairwise`` (ensemble aggregated by ``aggregate``)."""
+        """Compute ``D`` and ``C`` with ``agent.pairwise`` (ensemble aggregated by ``aggregate``);
+        ``detour`` defaults to :func:`~agents.search.models.default_detour` of ``agent``."""
         obs = np.asarray(observations)
+        kwargs.setdefault("detour", default_detour(agent))
         pairwise = NodePairwise(agent, obs, aggregate)  # the nodes are encoded once
         D, C = pairwise(obs, obs)
         return cls(obs, D, C, pairwise, **kwargs)
@@ -397,7 +408,7 @@ class BufferPlanner:
             stepper_expansions_per_agent=self.stepper_expansions_per_agent,
             time_limit=self.time_limit, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
-            max_edges=self.max_edges, cost_guard=self.cost_guard)
+            max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour)
 
     def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
         """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
@@ -451,7 +462,8 @@ class BufferPlanner:
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
-                                   cost_guard=self.cost_guard, detached=detached, goal_detached=goal_detached,
+                                   cost_guard=self.cost_guard, detour=self.detour, detached=detached,
+                                   goal_detached=goal_detached,
                                    attached=self._attached[1], passing=passing)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,

@@ -4,7 +4,7 @@
 - :func:`relax_cost_locally`: an agent that the cut-off leaves without a path gets the edges
   around its start and goal back, at a doubling cut-off, until it has one;
 - :func:`admit_cheaper_routes`: an agent that the cut-off sends the long way round, at a far
-  higher predicted cost, gets its plain shortest route back where short hops corroborate it.
+  higher predicted cost, gets its plain shortest route back where :func:`trusted_edges` trusts it.
 """
 from __future__ import annotations
 
@@ -66,25 +66,47 @@ def shortest_routes(keep: np.ndarray, D: np.ndarray, sources: np.ndarray,
     return out
 
 
+def trusted_edges(route: List[int], D: np.ndarray, C: np.ndarray, hops: sparse.csr_matrix, d_max: float,
+                  corroboration: float = 2.0, cost_rate: float = 2.0) -> np.ndarray:
+    """Which edges ``u -> v`` of ``route`` read as real rather than as a wormhole (two panoramas
+    alike, far apart: a hop the critic predicts at a few steps that is some 60 m long).
+
+    An edge is trusted unless either test flags it:
+
+    - its predicted cost is more than a step's worth per step could make it, ``C[u, v] >
+      cost_rate * D[u, v] + cost_rate`` (the cost of one step is at most 1; traced Apartment2
+      wormholes read 4-12 per predicted step, real edges mostly under 1.5);
+    - no chain of hops shorter than ``d_max / 2`` (``hops``) leads from ``u`` to ``v`` within
+      ``corroboration`` times ``D[u, v]``, and the reverse reading ``D[v, u]`` is more than
+      ``1.5 * d_max``: a wormhole the critic also misjudges one way only is rare, while a real
+      edge out of a sparse corner (no short hops near an agent's start) reads alike both ways.
+    """
+    u, v = np.asarray(route[:-1]), np.asarray(route[1:])
+    forward = D[u, v]
+    chain = dijkstra(hops, directed=True, indices=u)[np.arange(len(u)), v]
+    cheap = C[u, v] <= cost_rate * (forward + 1.0)
+    corroborated = (chain <= corroboration * forward) | (D[v, u] <= 1.5 * d_max)
+    return cheap & corroborated
+
+
 def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
                          exclude: Optional[np.ndarray] = None, exclude_edges: Optional[np.ndarray] = None,
-                         factor: float = 2.0, corroboration: float = 2.0,
+                         factor: float = 2.0, corroboration: float = 2.0, detour: Optional[float] = None,
                          allowed: Optional[np.ndarray] = None) -> np.ndarray:
     """Admit (edit ``keep``) each agent's shortest route over every admissible edge where the cost
-    cut-off made its shortest route more than ``factor`` times as costly by the critic.
+    cut-off made its shortest route more than ``factor`` times as costly by the critic, or (``detour``,
+    ``None``: off) more than that many times as long and costlier at all.
 
     Pruning costly edges is meant to lower an agent's cost; a cut-off that leaves only a long
     detour of cheap edges can make the route's predicted cost (the sum of ``C`` over its edges)
     several times that of the plain shortest route (a traced Apartment0 plan: 16 hops, predicted
     35, against one hop, predicted 11, and 31 against 6 when driven). A small excess is worth
     paying: the cut-off also keeps out edges the critic misjudges (a hop through a wall reads
-    costly), and short hops are driven more reliably. And the plain route is admitted only where
-    every edge ``u -> v`` of it is corroborated: a chain of hops shorter than ``d_max / 2`` leads
-    from ``u`` to ``v`` within ``corroboration`` times ``D[u, v]``. A wormhole (two panoramas
-    alike, far apart: a traced Apartment2 hop predicted at 4 steps, 58 m long) has no such
-    chain, while a real shortcut across a room does. Returns which agents got their plain
-    shortest route admitted. ``allowed``: :func:`admissible` of the same arguments, where the
-    caller has it already.
+    costly), and short hops are driven more reliably. A detour that is both longer and costlier
+    buys nothing. The plain route is admitted only where :func:`trusted_edges` trusts every edge
+    of it (``corroboration``: its chain factor). Returns which agents got their plain shortest
+    route admitted. ``allowed``: :func:`admissible` of the same arguments, where the caller has it
+    already.
     """
     n = n_buffer
     k = (D.shape[0] - n) // 2
@@ -96,17 +118,20 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
     pruned = shortest_routes(keep, D, s_ids, g_ids)
     hops = None
 
-    def cost(route: List[int]) -> float:
-        return float(C[route[:-1], route[1:]].sum())
+    def total(M: np.ndarray, route: List[int]) -> float:
+        return float(M[route[:-1], route[1:]].sum())
 
     for i, (p, q) in enumerate(zip(plain, pruned)):
-        if p is None or q is None or cost(q) <= factor * cost(p):
+        if p is None or q is None:
+            continue
+        costly = total(C, q) > factor * total(C, p)
+        roundabout = detour is not None and total(D, q) > detour * total(D, p) and total(C, q) > total(C, p)
+        if not (costly or roundabout):
             continue
         if hops is None:
             rows, cols = np.nonzero(allowed & (D < d_max / 2))
             hops = sparse.csr_matrix((np.maximum(D[rows, cols], _MIN_DISTANCE), (rows, cols)), shape=D.shape)
-        chain = dijkstra(hops, directed=True, indices=p[:-1])[np.arange(len(p) - 1), p[1:]]
-        if np.all(chain <= corroboration * D[p[:-1], p[1:]]):
+        if trusted_edges(p, D, C, hops, d_max, corroboration).all():
             keep[p[:-1], p[1:]] = True
             admitted[i] = True
     return admitted
@@ -146,4 +171,5 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
             keep[short & (C < c) & bwd[i][None, :]] = True
 
 
-__all__ = ["admissible", "admit_cheaper_routes", "relax_cost_locally", "route_from_predecessors", "shortest_routes"]
+__all__ = ["admissible", "admit_cheaper_routes", "relax_cost_locally", "route_from_predecessors", "shortest_routes",
+           "trusted_edges"]

@@ -320,6 +320,12 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
     # and a factor of 1 admits it
     c = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0, cost_guard=1.0).plan(start, goal)
     assert c.waypoint_observations(0)[:, 1].max() < 2.0
+    # so does ``detour``: that detour is also over 1.5 times as long, and longer and costlier buys nothing
+    d = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0, detour=1.5)
+    assert d.options()["detour"] == 1.5 and d.with_options(c_max=2.0).detour == 1.5
+    assert d.plan(start, goal).waypoint_observations(0)[:, 1].max() < 2.0
+    with pytest.raises(ValueError, match="detour"):
+        make_planner(pts, pw, detour=0.9)
     with pytest.raises(ValueError, match="cost_guard"):
         make_planner(pts, pw, cost_guard=0.5)
 
@@ -337,6 +343,13 @@ def test_admit_cheaper_routes_on_a_hand_made_graph():
     assert shortest_routes(keep, D, np.array([2]), np.array([3])) == [[2, 0, 1, 3]]
     assert shortest_routes(keep, D, np.array([3]), np.array([2])) == [None]
     assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0).any()  # 3 is within twice 2
+    # but the detour is three times as long and costlier: it buys nothing
+    assert admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=1.5).tolist() == [True]
+    # as long, or no costlier: kept
+    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=3.0).any()
+    C[2, 3] = 3.0
+    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=1.5).any()
+    C[2, 3] = 2.0
     admitted = admit_cheaper_routes(keep, D, C, 2, d_max=5.0, factor=1.0)
     assert admitted.tolist() == [True] and keep[2, 3]
     # the direct hop costing more than the detour is not admitted
@@ -357,11 +370,13 @@ def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
     from agents.search.pruning import admit_cheaper_routes
 
     # start 2, goal 3; the cut-off keeps 2 -> 0 -> 1 -> 3 (hops of 2 steps, cost 3); the direct hop
-    # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps)
-    def graph(direct):
+    # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps);
+    # the goal reads the start 8 steps away (more than 1.5 d_max)
+    def graph(direct, reverse=8.0):
         D = np.full((4, 4), 4.9)
         D[2, 0] = D[0, 1] = D[1, 3] = 2.0
         D[2, 3] = direct
+        D[3, 2] = reverse
         C = np.full((4, 4), 1.0)
         keep = np.zeros((4, 4), dtype=bool)
         keep[2, 0] = keep[0, 1] = keep[1, 3] = True
@@ -373,6 +388,30 @@ def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
     assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
     keep, D, C = graph(direct=2.6)
     assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0, corroboration=3.0).tolist() == [True]
+    # a hop out of a sparse corner: no chain, but the critic reads it alike both ways
+    keep, D, C = graph(direct=2.6, reverse=3.0)
+    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
+
+
+def test_a_hop_that_costs_more_than_its_steps_can_is_not_trusted():
+    from scipy import sparse
+
+    from agents.search.pruning import admit_cheaper_routes, trusted_edges
+
+    # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 15), the direct hop reads 2 steps
+    D = np.full((4, 4), 2.0)
+    C = np.full((4, 4), 5.0)
+    keep = np.zeros((4, 4), dtype=bool)
+    keep[2, 0] = keep[0, 1] = keep[1, 3] = True
+    hops = sparse.csr_matrix(D)
+    C[2, 3] = 6.0  # at most 1 a step: 2 steps may cost (with the margin) up to 2 * (2 + 1)
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0).tolist() == [True]
+    assert admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0).tolist() == [True]
+    C[2, 3] = 6.5  # a wormhole: two panoramas alike, far apart, and the cost critic sees the long way
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0).tolist() == [False]
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0, cost_rate=3.0).tolist() == [True]
+    assert trusted_edges([2, 0, 1, 3], D, C, hops, d_max=5.0).tolist() == [True, True, True]
+    assert not admit_cheaper_routes(keep, D, C, 2, d_max=5.0).any() and not keep[2, 3]
 
 
 def test_the_endpoints_are_attached_once_for_the_graphs_of_one_place():

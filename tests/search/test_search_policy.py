@@ -219,6 +219,21 @@ def test_controller_defaults_follow_the_observation_type(agent):
     assert custom.controller_kwargs == {"settle_patience": 3}
 
 
+def test_the_planner_admits_longer_and_costlier_detours_back_for_panorama_agents_only(agent, nodes):
+    from types import SimpleNamespace
+
+    from gymnasium import spaces
+
+    from agents.search.models import PANORAMA_DETOUR, default_detour
+
+    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
+    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
+    assert default_detour(pano) == PANORAMA_DETOUR == 1.5 and default_detour(agent) is None
+    # a vector agent's graph keeps the detours (its tables were made so), unless asked
+    assert BufferPlanner.from_agent(agent, nodes[:20]).detour is None
+    assert BufferPlanner.from_agent(agent, nodes[:20], detour=2.0).detour == 2.0
+
+
 def test_a_stuck_agent_whose_ban_cuts_every_route_retries_banning_only_the_failed_waypoint(agent, nodes):
     """Banning every node near a failed waypoint can disconnect the graph (the only doorway);
     the replan then bans the failed waypoints alone instead of giving the waypoint up."""
