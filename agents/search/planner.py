@@ -3,34 +3,29 @@
 This is the glue between the critics, the :class:`~agents.search.graph.WaypointGraph`, CBS
 and the :class:`~agents.search.controller.WaypointController`:
 
-1. the graph's nodes are observations with predicted distances ``D`` and costs ``C`` between
-   every pair (:meth:`BufferPlanner.from_agent` computes them once);
-2. for a problem, each agent's start and goal observations are attached as extra nodes
-   (their distances and costs to every node come from the same critics);
-3. edges are kept where ``D < d_max`` and ``C < c_max``; an endpoint always keeps its
-   ``endpoint_edges`` cheapest edges, so that an agent that starts (or ends) in a costly
-   place is not cut off;
-4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS
-   for up to ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above,
-   repairs with large neighbourhoods where ECBS runs out of its budget and steps all agents
-   together by priority inheritance where prioritised planning gives up, see
-   :class:`BufferPlanner`). Under the default ``"durative"`` time model an edge
-   takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when
-   they are at nodes whose predicted distance (either direction) is below
-   ``proximity_radius`` (buffer nodes are distinct points, so "same node" alone would miss
-   real collisions);
+1. the graph's nodes are observations with predicted distances ``D`` and costs ``C`` between every pair
+   (:meth:`BufferPlanner.from_agent` computes them once);
+2. for a problem, each agent's start and goal observations are attached as extra nodes (their distances and
+   costs to every node come from the same critics);
+3. edges are kept where ``D < d_max`` and ``C < c_max``; an endpoint always keeps its ``endpoint_edges``
+   cheapest edges, so that an agent that starts (or ends) in a costly place is not cut off;
+4. a multi-agent solver plans collision-free timed paths (``solver``: ``"auto"`` picks ECBS for up to
+   ``AUTO_SEARCH_AGENTS`` agents and prioritised planning with safe intervals above, repairs with large
+   neighbourhoods where ECBS runs out of its budget and steps all agents together by priority inheritance
+   where prioritised planning gives up, see :class:`BufferPlanner`). Under the default ``"durative"`` time
+   model an edge takes ``ceil(D)`` plan steps, so plan time is environment time; two agents conflict when they
+   are at nodes whose predicted distance (either direction) is below ``proximity_radius`` (buffer nodes are
+   distinct points, so "same node" alone would miss real collisions);
 5. :meth:`MultiAgentPlan.agent_plans` turns the paths into per-agent waypoint observations
    and departure times for the controller.
 
-If the cost-pruned graph leaves some agent without any path, the cut-off is relaxed around
-that agent's start and goal only (doubling until a path exists; ``MultiAgentPlan.c_max``
-reports the largest value used), so the rest of the graph stays as safe as asked; with
-``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of time, a second
-call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan.
-Every solver call is budgeted in expansions (``expansion_limit``,
-``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``,
-``stepper_expansions_per_agent``), with a wall-clock limit
-(``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
+If the cost-pruned graph leaves some agent without any path, the cut-off is relaxed around that agent's start
+and goal only (doubling until a path exists; ``MultiAgentPlan.c_max`` reports the largest value used), so the
+rest of the graph stays as safe as asked; with ``relax_cost=False`` the plan is ``"infeasible"`` instead. If
+CBS runs out of time, a second call with a looser suboptimality bound (``fallback_suboptimality``) usually
+finds a plan. Every solver call is budgeted in expansions (``expansion_limit``,
+``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``, ``stepper_expansions_per_agent``), with
+a wall-clock limit (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -226,65 +221,61 @@ class BufferPlanner:
     Args:
         observations: the graph's node observations, ``(N, ...)``.
         D, C: predicted distance and cost between every pair of nodes, ``(N, N)``.
-        pairwise: ``pairwise(obs_a, obs_b) -> (D, C)`` from the same critics, used to attach
-            start and goal observations (e.g. ``agent.pairwise``).
+        pairwise: ``pairwise(obs_a, obs_b) -> (D, C)`` from the same critics, used to attach start and goal
+            observations (e.g. ``agent.pairwise``).
         d_max: keep edges with ``D < d_max`` (default 7, the paper's value).
         c_max: keep edges with ``C < c_max`` (``inf``: distance pruning only, as in SoRB).
-        endpoint_edges: every start keeps at least its this many cheapest outgoing edges and
-            every goal its cheapest incoming ones, whatever ``c_max``.
-        proximity_radius: agents conflict at nodes closer than this (predicted steps, either
-            direction); ``None`` checks only same-node conflicts.
-        time_model: ``"durative"`` (edges take ``ceil(D)`` steps) or ``"unit"`` (the paper's
-            one step per edge).
-        suboptimality: 1 for optimal CBS, ``w > 1`` for ECBS within ``w`` of optimal (default
-            1.1: optimal CBS is often too slow with 20 agents on a dense buffer graph).
-        solver: ``"cbs"`` (CBS, or ECBS with ``suboptimality > 1``), ``"prioritized"``
-            (prioritised planning with safe-interval path planning,
-            :func:`~agents.search.mapf.prioritized.solve_prioritized`: agents one after
-            another, each on its earliest path around the earlier ones; fast with hundreds of
-            agents, cost not bounded, can fail where a plan exists), ``"lns"`` (large-neighbourhood
-            repair, :func:`~agents.search.mapf.lns.solve_lns`: a prioritised plan in which an
-            agent that finds no conflict-free path takes the least conflicting one, then small
-            groups of agents re-planned until no conflict is left; solves crowds where
-            prioritised planning gives up), ``"pibt"`` (the priority inheritance stepper,
-            :func:`~agents.search.mapf.pibt.solve_pibt`: all agents step together, an agent in
-            the way of a more urgent one is pushed off its node; solves the crowds of the most
-            agents the environment holds, with long makespans) or ``"auto"`` (default):
-            ``"cbs"`` for up to ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS
-            runs out of its budget (status ``"timeout"``), else ``"prioritized"``, then
-            ``"pibt"`` if prioritised planning gives up (status ``"timeout"``; not the repair:
-            where prioritised planning gives up on the 1000-node buffer graph, the repair spent
-            its whole budget, about a minute, and solved none).
-        expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions
-            (space-time states; ``None``: none). Counted in work, not seconds, so the same
-            problem gives the same plan (or the same timeout) on an idle and a loaded machine.
-        prioritized_expansions_per_agent: the work budget of prioritised planning, in
-            safe-interval expansions over all agents and restarts, per agent (``None``: none).
-        repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in
-            search expansions over the initial plan and the repair, per agent (``None``: none).
-        repair_seed: seeds the repair's choice of the agents re-planned together (an integer;
-            the same seed, the same plan).
-        stepper_expansions_per_agent: the work budget of the priority inheritance stepper, in
-            candidate moves examined, per agent (``None``: none).
-        time_limit: seconds for one solver call, a safety net behind ``expansion_limit``.
-            Either ends the call with status ``"timeout"`` (the message says which).
-        relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report
-            infeasible); see :meth:`_connect`.
-        fallback_suboptimality: if CBS runs out of time, one more try with this (larger)
-            suboptimality bound and the same time limit (``None``: no second try).
-        budget_labels: label limit of the exact risk-bounded search of :meth:`plan`'s budget
-            mode; past it, a Lagrangian path within the budget is used instead.
-        max_edges: keep at most this many edges out of each buffer node towards other buffer nodes
-            (its shortest ones; ``None``: every edge under the cut-offs). Fewer long edges, fewer
-            edges a critic can misjudge (see also :meth:`sparsified`).
-        cost_guard: where ``c_max`` leaves an agent only a detour the critic predicts more than this
-            many times as costly as its shortest route without the cut-off, that route is admitted
-            too (:func:`~agents.search.pruning.admit_cheaper_routes`): no agent is sent the long way
-            round to a far higher cost (``None``: off).
-        detour: where ``c_max`` leaves an agent only a route more than this many times as long as
-            its shortest route without the cut-off, and costlier by the critic at all, that route is
-            admitted too: longer and costlier buys nothing (``None``: off, the default;
-            :meth:`from_agent` turns it on for agents of panoramas, :func:`~agents.search.models.default_detour`).
+        endpoint_edges: every start keeps at least its this many cheapest outgoing edges and every goal its cheapest
+            incoming ones, whatever ``c_max``.
+        proximity_radius: agents conflict at nodes closer than this (predicted steps, either direction); ``None``
+            checks only same-node conflicts.
+        time_model: ``"durative"`` (edges take ``ceil(D)`` steps) or ``"unit"`` (the paper's one step per edge).
+        suboptimality: 1 for optimal CBS, ``w > 1`` for ECBS within ``w`` of optimal (default 1.1: optimal CBS is
+            often too slow with 20 agents on a dense buffer graph).
+        solver: ``"cbs"`` (CBS, or ECBS with ``suboptimality > 1``), ``"prioritized"`` (prioritised planning with
+            safe-interval path planning, :func:`~agents.search.mapf.prioritized.solve_prioritized`: agents one after
+            another, each on its earliest path around the earlier ones; fast with hundreds of agents, cost not
+            bounded, can fail where a plan exists), ``"lns"`` (large-neighbourhood repair,
+            :func:`~agents.search.mapf.lns.solve_lns`: a prioritised plan in which an agent that finds no
+            conflict-free path takes the least conflicting one, then small groups of agents re-planned until no
+            conflict is left; solves crowds where prioritised planning gives up), ``"pibt"`` (the priority
+            inheritance stepper, :func:`~agents.search.mapf.pibt.solve_pibt`: all agents step together, an agent in
+            the way of a more urgent one is pushed off its node; solves the crowds of the most agents the
+            environment holds, with long makespans) or ``"auto"`` (default): ``"cbs"`` for up to
+            ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its budget (status
+            ``"timeout"``), else ``"prioritized"``, then ``"pibt"`` if prioritised planning gives up (status
+            ``"timeout"``; not the repair: where prioritised planning gives up on the 1000-node buffer graph, the
+            repair spent its whole budget, about a minute, and solved none).
+        expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions (space-time states;
+            ``None``: none). Counted in work, not seconds, so the same problem gives the same plan (or the same
+            timeout) on an idle and a loaded machine.
+        prioritized_expansions_per_agent: the work budget of prioritised planning, in safe-interval expansions over
+            all agents and restarts, per agent (``None``: none).
+        repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in search expansions over
+            the initial plan and the repair, per agent (``None``: none).
+        repair_seed: seeds the repair's choice of the agents re-planned together (an integer; the same seed, the
+            same plan).
+        stepper_expansions_per_agent: the work budget of the priority inheritance stepper, in candidate moves
+            examined, per agent (``None``: none).
+        time_limit: seconds for one solver call, a safety net behind ``expansion_limit``. Either ends the call with
+            status ``"timeout"`` (the message says which).
+        relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report infeasible); see
+            :meth:`_connect`.
+        fallback_suboptimality: if CBS runs out of time, one more try with this (larger) suboptimality bound and the
+            same time limit (``None``: no second try).
+        budget_labels: label limit of the exact risk-bounded search of :meth:`plan`'s budget mode; past it, a
+            Lagrangian path within the budget is used instead.
+        max_edges: keep at most this many edges out of each buffer node towards other buffer nodes (its shortest
+            ones; ``None``: every edge under the cut-offs). Fewer long edges, fewer edges a critic can misjudge (see
+            also :meth:`sparsified`).
+        cost_guard: where ``c_max`` leaves an agent only a detour the critic predicts more than this many times as
+            costly as its shortest route without the cut-off, that route is admitted too
+            (:func:`~agents.search.pruning.admit_cheaper_routes`): no agent is sent the long way round to a far
+            higher cost (``None``: off).
+        detour: where ``c_max`` leaves an agent only a route more than this many times as long as its shortest route
+            without the cut-off, and costlier by the critic at all, that route is admitted too: longer and costlier
+            buys nothing (``None``: off, the default; :meth:`from_agent` turns it on for agents of panoramas,
+            :func:`~agents.search.models.default_detour`).
     """
 
     def __init__(
@@ -349,29 +340,24 @@ class BufferPlanner:
             raise ValueError(f"repair_seed must be an integer, got {repair_seed!r}")
         if not time_limit > 0:
             raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
-        self.solver = solver
-        self.expansion_limit = None if expansion_limit is None else int(expansion_limit)
-        self.prioritized_expansions_per_agent = (None if prioritized_expansions_per_agent is None
-                                                 else int(prioritized_expansions_per_agent))
-        self.repair_expansions_per_agent = (None if repair_expansions_per_agent is None
-                                            else int(repair_expansions_per_agent))
-        self.repair_seed = int(repair_seed)
-        self.stepper_expansions_per_agent = (None if stepper_expansions_per_agent is None
-                                             else int(stepper_expansions_per_agent))
-        self.time_limit = float(time_limit)
-        self.relax_cost = bool(relax_cost)
-        if fallback_suboptimality is not None and not fallback_suboptimality >= 1.0:
-            raise ValueError(f"fallback_suboptimality must be >= 1 or None, got {fallback_suboptimality!r}")
-        self.fallback_suboptimality = fallback_suboptimality
-        self.budget_labels = int(budget_labels)
+        for name, factor in (("fallback_suboptimality", fallback_suboptimality), ("cost_guard", cost_guard),
+                             ("detour", detour)):
+            if factor is not None and not factor >= 1.0:
+                raise ValueError(f"{name} must be >= 1 or None, got {factor!r}")
         if max_edges is not None and int(max_edges) < 1:
             raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
+        self.solver = solver
+        limits = (expansion_limit, prioritized_expansions_per_agent, repair_expansions_per_agent,
+                  stepper_expansions_per_agent)
+        (self.expansion_limit, self.prioritized_expansions_per_agent, self.repair_expansions_per_agent,
+         self.stepper_expansions_per_agent) = (None if v is None else int(v) for v in limits)
+        self.repair_seed = int(repair_seed)
+        self.time_limit = float(time_limit)
+        self.relax_cost = bool(relax_cost)
+        self.fallback_suboptimality = fallback_suboptimality
+        self.budget_labels = int(budget_labels)
         self.max_edges = None if max_edges is None else int(max_edges)
-        if cost_guard is not None and not cost_guard >= 1.0:
-            raise ValueError(f"cost_guard must be >= 1 or None, got {cost_guard!r}")
         self.cost_guard = None if cost_guard is None else float(cost_guard)
-        if detour is not None and not detour >= 1.0:
-            raise ValueError(f"detour must be >= 1 or None, got {detour!r}")
         self.detour = None if detour is None else float(detour)
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
@@ -463,8 +449,7 @@ class BufferPlanner:
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
                                    cost_guard=self.cost_guard, detour=self.detour, detached=detached,
-                                   goal_detached=goal_detached,
-                                   attached=self._attached[1], passing=passing)
+                                   goal_detached=goal_detached, attached=self._attached[1], passing=passing)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,
