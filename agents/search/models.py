@@ -171,5 +171,4 @@ def default_detour(model: Any) -> Optional[float]:
 
 __all__ = ["DistanceFn", "PANORAMA_CONTROLLER_OPTIONS", "PANORAMA_DETOUR", "PANORAMA_REACH_THRESHOLD", "PolicyFn",
            "REACH_THRESHOLD", "buffer_observations", "check_models", "default_controller_options", "default_detour",
-           "default_hold",
-           "default_reach_threshold", "distance_fn", "env_observations", "policy_fn"]
+           "default_hold", "default_reach_threshold", "distance_fn", "env_observations", "policy_fn"]
