@@ -164,7 +164,8 @@ def default_detour(model: Any) -> Optional[float]:
     routes, and admitting the plain route where it is trusted
     (:func:`~agents.search.pruning.trusted_edges`) lowers the cost at no loss (validation problems
     of the four apartments, 1200 runs: 1188 -> 1189 arrived, mean largest cost 47.51 -> 47.15).
-    Vector agents' tables were made without it.
+    For vector agents it changes nothing that matters (CentralObstacle's Table I problems, 600 runs:
+    mean largest cost 11.29 -> 11.33, all arrive either way), and their tables were made without it.
     """
     return PANORAMA_DETOUR if _reads_images(model) else None
 
