@@ -119,15 +119,15 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
     pruned = shortest_routes(keep, D, s_ids, g_ids)
     hops = None
 
-    def total(M: np.ndarray, route: List[int]) -> float:
-        return float(M[route[:-1], route[1:]].sum())
+    def totals(route: List[int]) -> Tuple[float, float]:  # (length, cost) by the critic
+        return float(D[route[:-1], route[1:]].sum()), float(C[route[:-1], route[1:]].sum())
 
     for i, (p, q) in enumerate(zip(plain, pruned)):
         if p is None or q is None:
             continue
-        costly = total(C, q) > factor * total(C, p)
-        roundabout = detour is not None and total(D, q) > detour * total(D, p) and total(C, q) > total(C, p)
-        if not (costly or roundabout):
+        (d_p, c_p), (d_q, c_q) = totals(p), totals(q)
+        roundabout = detour is not None and d_q > detour * d_p and c_q > c_p
+        if not (c_q > factor * c_p or roundabout):
             continue
         if hops is None:
             rows, cols = np.nonzero(allowed & (D < d_max / 2))
