@@ -29,7 +29,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from agents.search.graph import NodePairwise
-from agents.search.models import default_detour
+from agents.search.models import default_detour, default_second_opinion
 from agents.search.planner import BufferPlanner
 from agents.search.repair import EdgeMemory
 from agents.search.sparsify import two_way_consistent
@@ -86,7 +86,8 @@ class EvaluationSetup:
         self.planner = BufferPlanner(
             self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
             d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
-            time_limit=self.cbs_time_limit, max_edges=self.max_edges, detour=default_detour(unc))
+            time_limit=self.cbs_time_limit, max_edges=self.max_edges, detour=default_detour(unc),
+            second_opinion=default_second_opinion(unc, self.models.get("constrained")))
         # problem difficulty: shortest predicted distances on the planner's own buffer graph
         self.shortest = dijkstra(self.planner.buffer_graph.distance, directed=True)
 

@@ -470,13 +470,27 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
     return out
 
 
+def check_endpoints(observations: np.ndarray, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """``starts`` and ``goals`` as arrays of the nodes' dtype; ``ValueError`` unless both are ``(K, ...)`` of the
+    nodes' observation shape and finite."""
+    starts = np.asarray(starts, dtype=observations.dtype)
+    goals = np.asarray(goals, dtype=observations.dtype)
+    if starts.shape != goals.shape or starts.shape[1:] != observations.shape[1:]:
+        raise ValueError(f"starts {starts.shape} and goals {goals.shape} must both be (K, "
+                         f"{', '.join(map(str, observations.shape[1:]))})")
+    for name, x in (("starts", starts), ("goals", goals)):
+        if not np.isfinite(x).all():
+            raise ValueError(f"{name} contain NaN or infinite values")
+    return starts, goals
+
+
 def build_problem_graph(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
     starts: np.ndarray, goals: np.ndarray, *, d_max: float, c_max: float, endpoint_edges: int = 3,
     relax_cost: bool = True, exclude: Optional[Sequence[int]] = None,
     exclude_edges: Optional[np.ndarray] = None, max_edges: Optional[int] = None,
     avoid: Optional[np.ndarray] = None, avoid_slack: float = 0.0, cost_guard: Optional[float] = 2.0,
-    detour: Optional[float] = None,
+    detour: Optional[float] = None, second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
     attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
@@ -494,6 +508,9 @@ def build_problem_graph(
     route the cut-off made more than ``cost_guard`` times as costly by the critic as its shortest
     route without it gets that route too (:func:`admit_cheaper_routes`; ``None``: never), and so does one
     whose route the cut-off made more than ``detour`` times as long and costlier at all.
+    ``second_opinion(obs_a, obs_b)``: a second critic's predicted steps from ``obs_a[i]`` to ``obs_b[i]``,
+    which vouches for such a route's edges that nothing else backs
+    (:func:`~agents.search.pruning.trusted_edges`).
     ``detached`` lists buffer nodes no start may link to directly (an agent that failed to reach them
     from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
@@ -536,10 +553,12 @@ def build_problem_graph(
     ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee,
                                     allowed=allowed)
     if cost_guard is not None and math.isfinite(c_max):
-        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, detour=detour, allowed=allowed)
+        confirm = None if second_opinion is None else (lambda u, v: second_opinion(obs[u], obs[v]))
+        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, detour=detour, allowed=allowed,
+                             confirm=confirm)
     graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 
 
 __all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
-           "edge_mask", "passing_edges", "problem_edge_mask"]
+           "check_endpoints", "edge_mask", "passing_edges", "problem_edge_mask"]

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import sparse
@@ -48,6 +48,7 @@ from .graph import (
     WaypointGraph,
     attach_endpoints,
     build_problem_graph,
+    check_endpoints,
     passing_edges,
 )
 from .mapf import CBSResult, CBSSolver, Proximity
@@ -276,6 +277,9 @@ class BufferPlanner:
             without the cut-off, and costlier by the critic at all, that route is admitted too: longer and costlier
             buys nothing (``None``: off, the default; :meth:`from_agent` turns it on for agents of panoramas,
             :func:`~agents.search.models.default_detour`).
+        second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
+            ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
+            (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.
     """
 
     def __init__(
@@ -304,6 +308,7 @@ class BufferPlanner:
         max_edges: Optional[int] = None,
         cost_guard: Optional[float] = 2.0,
         detour: Optional[float] = None,
+        second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -359,6 +364,7 @@ class BufferPlanner:
         self.max_edges = None if max_edges is None else int(max_edges)
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self.detour = None if detour is None else float(detour)
+        self.second_opinion = second_opinion
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
@@ -405,24 +411,15 @@ class BufferPlanner:
         if isinstance(pairwise, NodePairwise):  # it caches the codes of its own nodes
             pairwise = NodePairwise(pairwise.model, obs, pairwise.aggregate)
         ix = np.ix_(kept, kept)
-        return BufferPlanner(obs, self.D[ix], self.C[ix], pairwise, **self.options()), kept
+        return BufferPlanner(obs, self.D[ix], self.C[ix], pairwise, second_opinion=self.second_opinion,
+                             **self.options()), kept
 
     def with_options(self, **kwargs) -> "BufferPlanner":
         """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
+        kwargs.setdefault("second_opinion", self.second_opinion)
         return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **{**self.options(), **kwargs})
 
     # ------------------------------------------------------------------ problem graph
-    def _check_endpoints(self, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        starts = np.asarray(starts, dtype=self.observations.dtype)
-        goals = np.asarray(goals, dtype=self.observations.dtype)
-        if starts.shape != goals.shape or starts.shape[1:] != self.observations.shape[1:]:
-            raise ValueError(f"starts {starts.shape} and goals {goals.shape} must both be (K, "
-                             f"{', '.join(map(str, self.observations.shape[1:]))})")
-        for name, x in (("starts", starts), ("goals", goals)):
-            if not np.isfinite(x).all():
-                raise ValueError(f"{name} contain NaN or infinite values")
-        return starts, goals
-
     def problem_graph(self, starts: np.ndarray, goals: np.ndarray, exclude: Optional[Sequence[int]] = None,
                       exclude_edges: Optional[np.ndarray] = None, avoid: Optional[np.ndarray] = None,
                       detached: Optional[Sequence[int]] = None,
@@ -431,7 +428,7 @@ class BufferPlanner:
         observations, pruned with this planner's cut-offs (see
         :func:`~agents.search.graph.build_problem_graph`; edges that pass a place of ``avoid`` go
         within the proximity radius)."""
-        starts, goals = self._check_endpoints(starts, goals)
+        starts, goals = check_endpoints(self.observations, starts, goals)
         key = (starts.shape, starts.tobytes(), goals.tobytes())
         if self._attached is None or self._attached[0] != key:
             self._attached = (key, attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
@@ -448,7 +445,8 @@ class BufferPlanner:
                                    d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
                                    relax_cost=self.relax_cost, exclude=exclude, exclude_edges=exclude_edges,
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
-                                   cost_guard=self.cost_guard, detour=self.detour, detached=detached,
+                                   cost_guard=self.cost_guard, detour=self.detour,
+                                   second_opinion=self.second_opinion, detached=detached,
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing)
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,

@@ -43,6 +43,7 @@ from .models import (
     default_controller_options,
     default_hold,
     default_reach_threshold,
+    default_second_opinion,
     distance_fn,
     env_observations,
     policy_fn,
@@ -245,6 +246,7 @@ class SearchPolicy(StuckReplanning):
             obs = buffer_observations(nodes, n_nodes, np.random.default_rng(seed))
         else:
             obs = np.asarray(nodes)
+        planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
         planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate, **planner_options)
         if sparsify is not None:
             planner, _ = planner.sparsified(sparsify)
@@ -283,6 +285,7 @@ class SearchPolicy(StuckReplanning):
         planner_options, kwargs = _split_options(cls, options)
         if memory.n_nodes != len(obs):
             raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
+        planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
         planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), **{**saved, **planner_options})
         kwargs.setdefault("memory", memory)
         return cls(planner, driver if driver is not None else critic, **kwargs)

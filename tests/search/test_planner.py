@@ -393,6 +393,88 @@ def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
     assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
 
 
+def test_a_second_critic_vouches_for_a_hop_nothing_else_backs():
+    """A hop through a narrow passage with no node inside has no chain and reads long backwards, like a
+    wormhole; a second critic that reads it short too gets it trusted, one that reads it long does not."""
+    from scipy import sparse
+
+    from agents.search.pruning import admit_cheaper_routes, trusted_edges
+
+    # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3); the direct hop reads 2.6 steps (cost 1),
+    # no chain backs it and the goal reads the start 8 steps away (more than 1.5 * d_max)
+    D = np.full((4, 4), 4.9)
+    D[2, 0] = D[0, 1] = D[1, 3] = 2.0
+    D[2, 3], D[3, 2] = 2.6, 8.0
+    C = np.full((4, 4), 1.0)
+    keep = np.zeros((4, 4), dtype=bool)
+    keep[2, 0] = keep[0, 1] = keep[1, 3] = True
+    rows, cols = np.nonzero(D < 2.5)
+    hops = sparse.csr_matrix((D[rows, cols], (rows, cols)), shape=D.shape)
+    asked = []
+
+    def second(reading):
+        def confirm(u, v):
+            asked.append((u.tolist(), v.tolist()))
+            return np.full(len(u), reading)
+        return confirm
+
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0).tolist() == [False]
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0, confirm=second(3.0)).tolist() == [True]
+    assert asked == [([2], [3])]
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0, confirm=second(19.5)).tolist() == [False]
+    # only the hops nothing else backs are put to it (2 -> 0 -> 1 -> 3 has its chain)
+    asked.clear()
+    assert trusted_edges([2, 0, 1, 3], D, C, hops, d_max=5.0, confirm=second(19.5)).all() and asked == []
+    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, confirm=second(19.5)).any()
+    k2 = keep.copy()
+    assert admit_cheaper_routes(k2, D, C, 2, d_max=5.0, confirm=second(3.0)).tolist() == [True] and k2[2, 3]
+    # a hop that costs more than its steps can is not vouched for, whatever the second critic reads
+    C[2, 3] = 7.5
+    assert trusted_edges([2, 3], D, C, hops, d_max=5.0, confirm=second(2.0)).tolist() == [False]
+
+
+def test_the_planner_asks_its_second_opinion_on_observations():
+    from agents.search.models import SecondOpinion
+
+    band = band_pairwise(gap_y=11.5)
+
+    def critic(a, b):  # reads every crossing of the band below its gap, right to left, 20 steps long
+        D, C = band(a, b)
+        a, b = np.asarray(a, float)[:, None, :], np.asarray(b, float)[None, :, :]
+        D = np.where((a[..., 0] > 3.0) & (b[..., 0] < 3.0) & (np.maximum(a[..., 1], b[..., 1]) < 11.5), 20.0, D)
+        return D, C
+
+    class Second:
+        def __init__(self, reading):
+            self.reading, self.asked = reading, []
+
+        def distance(self, a, b, aggregate="max"):
+            self.asked.append((np.asarray(a).copy(), np.asarray(b).copy()))
+            return np.full(len(a), self.reading)
+
+    # no node at x = 3: no chain of short hops crosses the band, and the crossings read long backwards
+    gx, gy = np.meshgrid([0.0, 1.0, 2.0, 4.0, 5.0, 6.0], np.arange(13.0))
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    start, goal = np.array([[0.0, 0.0]]), np.array([[6.0, 0.0]])
+    straight = {}
+    for reading in (None, 2.0, 20.0):
+        second = Second(reading)
+        planner = make_planner(pts, critic, d_max=2.5, c_max=1.0,
+                               second_opinion=None if reading is None else SecondOpinion(second))
+        assert "second_opinion" not in planner.options()
+        assert planner.with_options(c_max=2.0).second_opinion is planner.second_opinion
+        assert planner.sparsified(0.5)[0].second_opinion is planner.second_opinion
+        plan = planner.plan(start, goal)
+        assert plan.solved
+        straight[reading] = bool(plan.waypoint_observations(0)[:, 1].max() < 2.0)
+        if reading is not None:  # asked about the crossing, on observations
+            a, b = second.asked[0]
+            assert a.shape == b.shape == (1, 2) and a[0, 0] < 3.0 < b[0, 0]
+    assert straight == {None: False, 2.0: True, 20.0: False}
+    with pytest.raises(ValueError, match="distance critic"):
+        SecondOpinion(object())
+
+
 def test_a_hop_that_costs_more_than_its_steps_can_is_not_trusted():
     from scipy import sparse
 

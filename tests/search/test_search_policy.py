@@ -234,6 +234,27 @@ def test_the_planner_admits_longer_and_costlier_detours_back_for_panorama_agents
     assert BufferPlanner.from_agent(agent, nodes[:20], detour=2.0).detour == 2.0
 
 
+def test_the_driver_is_the_graphs_second_opinion_where_it_is_another_critic(stand_in_models, nodes, tmp_path):
+    from agents.search.models import SecondOpinion, default_second_opinion
+
+    import copy
+
+    con = stand_in_models["constrained"]
+    unc = copy.copy(con)  # another critic
+    assert default_second_opinion(con, con) is None and default_second_opinion(con, None) is None
+    assert default_second_opinion(con, lambda obs: obs) is None  # a policy that only drives
+    second = default_second_opinion(unc, con)
+    assert isinstance(second, SecondOpinion) and second.model is con
+    np.testing.assert_allclose(second(nodes[:4], nodes[4:8]), con.distance(nodes[:4], nodes[4:8]))
+    policy = SearchPolicy.from_models(unc, con, nodes[:30], seed=0)
+    assert policy.planner.second_opinion.model is con
+    assert SearchPolicy.from_models(con, None, nodes[:30], seed=0).planner.second_opinion is None
+    assert SearchPolicy.from_models(unc, con, nodes[:30], seed=0, second_opinion=None).planner.second_opinion is None
+    path = policy.save(tmp_path / "graph")
+    assert SearchPolicy.load(path, unc, con).planner.second_opinion.model is con
+    assert SearchPolicy.load(path, unc).planner.second_opinion is None
+
+
 def test_a_stuck_agent_whose_ban_cuts_every_route_retries_banning_only_the_failed_waypoint(agent, nodes):
     """Banning every node near a failed waypoint can disconnect the graph (the only doorway);
     the replan then bans the failed waypoints alone instead of giving the waypoint up."""
