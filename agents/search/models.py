@@ -191,9 +191,9 @@ def default_second_opinion(critic: Any, driver: Any) -> Optional[SecondOpinion]:
     driver is another model with one (the paper's pair: the unconstrained agent builds, the
     constrained one drives); else ``None``.
 
-    Two critics trained apart rarely take the same two panoramas for neighbours: of 16 wormholes
+    Two critics trained apart rarely take the same two panoramas for neighbours: of 17 wormholes
     measured on Apartment2's and Apartment3's graphs (hops the unconstrained critic reads at 4-7
-    steps that are 40-65 steps long), the constrained agents read 15 at 19-20 steps; the 16th,
+    steps that are 40-65 steps long), the constrained agents read 16 at 19-20 steps; the 17th,
     read at 6, has a cost reading the trust test flags on its own.
     """
     if driver is None or driver is critic or not callable(getattr(driver, "distance", None)):

@@ -87,7 +87,7 @@ def trusted_edges(route: List[int], D: np.ndarray, C: np.ndarray, hops: sparse.c
       about 20 steps backwards. With ``confirm`` (a second critic, trained apart: the driving agent's),
       such an edge is still trusted where that critic reads it within ``1.5 * d_max`` too. Two critics
       rarely mistake the same pair of panoramas for neighbours: on Apartment2's and Apartment3's
-      graphs the driving agents read 15 of 16 wormholes measured at 19-20 steps (the 16th fails the
+      graphs the driving agents read 16 of 17 wormholes measured at 19-20 steps (the 17th fails the
       cost test), and 79-91% of the real edges that read long backwards within ``1.5 * d_max`` (a
       narrow passage with no node inside has no chain and reads so).
     """
