@@ -172,9 +172,9 @@ def default_detour(model: Any) -> Optional[float]:
 
 class SecondOpinion:
     """A planner's ``second_opinion``: ``model``'s predicted steps from ``obs_a[i]`` to ``obs_b[i]``
-    (``model.distance``, its ensemble combined by ``aggregate``), for edges only the model's
-    own critic has read (:func:`~agents.search.pruning.trusted_edges`). Picklable, so a planner that
-    holds one can go to other processes."""
+    (``model.distance``, its ensemble combined by ``aggregate``): a second reading of the edges
+    that nothing but the graph's own critic backs (:func:`~agents.search.pruning.trusted_edges`).
+    Picklable, so a planner that holds one can go to other processes."""
 
     def __init__(self, model: Any, aggregate: str = "max") -> None:
         if not callable(getattr(model, "distance", None)):
