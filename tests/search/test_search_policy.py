@@ -235,9 +235,9 @@ def test_the_planner_admits_longer_and_costlier_detours_back_for_panorama_agents
 
 
 def test_the_driver_is_the_graphs_second_opinion_where_it_is_another_critic(stand_in_models, nodes, tmp_path):
-    from agents.search.models import SecondOpinion, default_second_opinion
-
     import copy
+
+    from agents.search.models import SecondOpinion, default_second_opinion
 
     con = stand_in_models["constrained"]
     unc = copy.copy(con)  # another critic
