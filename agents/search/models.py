@@ -196,10 +196,9 @@ def default_second_opinion(critic: Any, driver: Any) -> Optional[SecondOpinion]:
     steps that are 40-65 steps long), the constrained agents read 16 at 19-20 steps; the 17th,
     read at 6, has a cost reading the trust test flags on its own.
     """
-    if driver is None or driver is critic or not callable(getattr(driver, "distance", None)):
-        return None
-    if not callable(getattr(driver, "pairwise", None)):  # a policy that only drives
-        return None
+    reads = all(callable(getattr(driver, f, None)) for f in ("distance", "pairwise"))
+    if driver is None or driver is critic or not reads:
+        return None  # no model of its own, or a policy that only drives
     return SecondOpinion(driver)
 
 
