@@ -20,6 +20,15 @@ beside it, although from the waypoint it arrives). An agent that settles beside 
 (``settle_patience``) still advances, and so does one that has come no closer to the waypoint (by a
 quarter step) for two steps: the test holds an agent only while it closes in on its waypoint (an
 agent held where it cannot come closer would soon count as stuck, escape and replan).
+
+*Back first* (``retreat``): an agent whose leg is handed to the fallback policy (it was found stuck
+on it) goes back to the waypoint it set off from before the fallback policy drives the leg, to where
+it comes no closer to that waypoint within its reach threshold; ``"goal"``: only on the leg to the
+goal, ``"any"``: on every leg but the first. Counted reached from up to a metre away, a waypoint at a
+corner can be left on the wrong side of the corner, and an agent found stuck on the next leg has
+mostly slid further along the wall the wrong way; from there neither policy may reach its target
+(Apartment3: a wall end at (10, 2.2) m with a goal behind it, where an agent of a traced run tried
+three approaches and arrived at step 73; going back, it arrives at step 37).
 """
 from __future__ import annotations
 
@@ -49,6 +58,13 @@ class AdvanceRules:
     _approach: Dict[str, Tuple[int, float, int]]
     #: per agent: the plan the onward distances are of, and per waypoint its predicted distance to the next target
     _onward: Dict[str, Tuple[Any, np.ndarray]]
+    retreat: Optional[str]
+    #: per agent going back first: the index of the target whose leg it went back from
+    _back: Dict[str, int]
+    #: per agent going back: (waypoint index, closest predicted distance, step it came that close)
+    _back_best: Dict[str, Tuple[int, float, int]]
+    #: the controller's no-progress record (reset where the target changes)
+    _best: Dict[str, Tuple[int, float, int]]
 
     def _reach_thresholds(self, plan: Any) -> np.ndarray:
         """Per waypoint of ``plan``: the predicted distance below which it counts as reached."""
@@ -112,6 +128,30 @@ class AdvanceRules:
         if to_next <= self._onward_distances(agent)[k] + self.advance_slack:
             return True
         self.stats.off_course += 1
+        return False
+
+
+    def _go_back(self, agent: str) -> None:
+        """With ``retreat``: send ``agent`` back to the waypoint it set off from on its current leg (none
+        on its first leg, nor while it already goes back; with ``"goal"``, only on its leg to the goal)."""
+        k = self.index[agent]
+        n = len(self.plans[agent].waypoints)
+        if self.retreat is None or agent in self._back or not 1 <= k <= n or self.retreat == "goal" and k < n:
+            return
+        self._back[agent] = k
+        self._back_best.pop(agent, None)
+        self._best.pop(agent, None)
+        self.stats.retreats += 1
+
+    def _back_done(self, agent: str, d: float) -> bool:
+        """Whether ``agent``, going back and at predicted distance ``d`` from the waypoint it went back to,
+        is there: within that waypoint's reach threshold and no closer for two steps (then it resumes its leg)."""
+        k = self._back[agent] - 1
+        best = self._closest(self._back_best, agent, k, d)
+        if d < self._thresholds[agent][k] and self.t - best[2] >= 2:
+            del self._back[agent]
+            self._best.pop(agent, None)
+            return True
         return False
 
 

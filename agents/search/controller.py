@@ -108,6 +108,8 @@ class ControllerStats:
     off_course: int = 0
     fallbacks: int = 0
     fallback_steps: int = 0
+    #: legs an agent went back to the waypoint it set off from before the fallback drove them (``retreat``)
+    retreats: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
     stalls: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
@@ -180,6 +182,9 @@ class WaypointController(GoalClearance, AdvanceRules):
             ``order_patience`` allows. An agent it holds so no longer waits for it by the plan's order.
         goal_clearance, push_margin: see *clear goal* and *yield* above (predicted steps; ``None``: off).
         advance_slack: see *advance* above (predicted steps; ``None``: off).
+        retreat: an agent whose leg is handed to ``fallback_policy`` goes back to the waypoint it
+            set off from first: ``"goal"`` on its leg to the goal, ``"any"`` on every leg but the
+            first (*back first* in :mod:`agents.search.advance`; ``None``: never).
     """
 
     def __init__(
@@ -209,6 +214,7 @@ class WaypointController(GoalClearance, AdvanceRules):
         sidestep_after: Optional[int] = None,
         push_margin: Optional[float] = None,
         advance_slack: Optional[float] = None,
+        retreat: Optional[str] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -274,6 +280,11 @@ class WaypointController(GoalClearance, AdvanceRules):
             raise ValueError(f"advance_slack must be >= 0 or None, got {advance_slack!r}")
         self.goal_clearance, self.push_margin, self.advance_slack = goal_clearance, push_margin, advance_slack
         self._onward: Dict[str, Tuple[AgentPlan, np.ndarray]] = {}
+        if retreat not in (None, "goal", "any"):
+            raise ValueError(f"retreat must be None, 'goal' or 'any', got {retreat!r}")
+        self.retreat = retreat
+        self._back: Dict[str, int] = {}
+        self._back_best: Dict[str, Tuple[int, float, int]] = {}
         self._approach: Dict[str, Tuple[int, float, int]] = {}
         self._yielding: Dict[str, Tuple[str, int, float]] = {}
         self._pushed: Dict[Tuple[str, str], str] = {}
@@ -291,7 +302,7 @@ class WaypointController(GoalClearance, AdvanceRules):
     def current_goal(self, agent: str) -> np.ndarray:
         """The observation agent ``agent`` currently heads for."""
         plan = self.plans[agent]
-        k = self.index[agent]
+        k = self._back[agent] - 1 if agent in self._back else self.index[agent]
         return plan.waypoints[k] if k < len(plan.waypoints) else plan.goal
 
     def _lag(self, agent: str) -> int:
@@ -360,6 +371,9 @@ class WaypointController(GoalClearance, AdvanceRules):
                 plan = self.plans[a]
                 k = self.index[a]
                 to_target[a] = float(d[i])
+                if a in self._back:  # going back first: resume the leg once there
+                    moved |= self._back_done(a, float(d[i]))
+                    continue
                 if k >= len(plan.waypoints):
                     continue
                 if (d[i] < self._thresholds[a][k] and (d[i] == -np.inf or self._on_course(a, k, obs[i], float(d[i])))
@@ -451,6 +465,7 @@ class WaypointController(GoalClearance, AdvanceRules):
             self._thresholds[agent] = self._reach_thresholds(plan)
             self._progress.pop(agent, None)
             self._approach.pop(agent, None)
+            self._back.pop(agent, None)
             self._stuck_count[agent] = 0
             self.stats.leg_escapes[agent] = 0
 
@@ -508,6 +523,7 @@ class WaypointController(GoalClearance, AdvanceRules):
             if self._stuck_count[a] >= self.skip_after:
                 if self.fallback_policy is not None and self._fallback_at.get(a) != self._reached[a]:
                     self._fallback_at[a] = self._reached[a]  # hand this leg over first
+                    self._go_back(a)
                     self._stuck_count[a] = 0
                     self.stats.fallbacks += 1
                 elif self.replan is not None:  # the target seems out of reach from here: a new plan

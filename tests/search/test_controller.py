@@ -378,6 +378,67 @@ def test_the_fallback_drives_only_the_stuck_leg():
     assert 5 <= ctrl.stats.fallback_steps <= 12
 
 
+def corner_run(retreat, fallback=straight_policy, limit=150, via=None):
+    """The approach waypoint (14, 44) lies within a wide reach threshold (18) of the start (14, 27), so it
+    counts as reached at once; heading for the goal (45, 27) from the start, the agent is pressed against
+    the central block's west face. From the waypoint it passes above the block. ``via``: one more
+    waypoint after it (then the goal is (45, 10), below the block)."""
+    goal = (45.0, 27.0) if via is None else (45.0, 10.0)
+    env = make_env([(14.0, 27.0)], [goal])
+    wps = [(14.0, 44.0)] + ([] if via is None else [via])
+    plan = AgentPlan(np.array(wps, np.float32) / SIZE, np.array(goal, np.float32) / SIZE)
+    ctrl = WaypointController(straight_policy, euclid_steps, {"agent_0": plan}, reach_threshold=18.0,
+                              safety_radius=None, fallback_policy=fallback, skip_after=1, seed=0, retreat=retreat)
+    return ctrl, run(env, ctrl, limit=limit)["agent_0"]
+
+
+@pytest.mark.parametrize("retreat", ["goal", "any"])
+def test_a_leg_handed_to_the_fallback_starts_again_from_the_waypoint_it_set_off_from(retreat):
+    ctrl, trail = corner_run(retreat=None)
+    assert np.linalg.norm(trail[-1] - [45, 27]) > 20.0  # pressed against the block to the end
+    assert ctrl.stats.fallbacks == 1 and ctrl.stats.retreats == 0
+    ctrl, trail = corner_run(retreat=retreat)
+    assert np.linalg.norm(trail[-1] - [45, 27]) <= 1.0  # arrived
+    assert ctrl.stats.fallbacks == 1 and ctrl.stats.retreats == 1
+    back = np.flatnonzero(np.linalg.norm(trail - [14, 44], axis=1) < 1.0)
+    stuck = np.flatnonzero(trail[:, 0] > 18.0)[0]
+    assert len(back) and back[0] > stuck  # first pressed against the block, then back at the waypoint
+    assert trail[back[0]:, 1].min() > 34.0 or trail[back[0]:, 0].max() > 36.0  # then over the block
+    # without a fallback policy nothing is handed over, and nobody goes back
+    ctrl, trail = corner_run(retreat=retreat, fallback=None, limit=60)
+    assert ctrl.stats.retreats == 0 and trail[:, 1].max() < 30.0
+
+
+def test_going_back_on_a_leg_before_the_goal_leg_is_for_retreat_any_only():
+    """Stuck on its way to the second waypoint (45, 27) behind the block, the agent goes back to the first
+    with ``"any"``; with ``"goal"`` it does not (the leg does not end at the goal)."""
+    for retreat, went_back in (("goal", 0), ("any", 1)):
+        ctrl, _ = corner_run(retreat=retreat, via=(45.0, 27.0), limit=60)
+        assert ctrl.stats.fallbacks >= 1 and ctrl.stats.retreats == went_back
+    with pytest.raises(ValueError, match="retreat must be"):
+        corner_run(retreat=True)
+
+
+def test_an_agent_stuck_on_its_way_back_asks_for_a_new_plan_which_ends_the_going_back():
+    """The wall pusher counts the waypoint (5, 27) reached at once, is pressed against the south wall on
+    its way to the goal, goes back (driven by the fallback, which pushes into the same wall), is found
+    stuck again and asks for a new plan: that ends the going back, and nobody goes back twice."""
+    asked = []
+
+    def replan(agent, obs, plan):
+        asked.append((agent in ctrl._back, ctrl.stats.retreats))
+        return AgentPlan(np.array([[14.0, 44.0]], np.float32) / SIZE, plan.goal)
+
+    env = make_env([(14.0, 27.0)], [(45.0, 27.0)])
+    plan = AgentPlan(np.array([[5.0, 27.0]], np.float32) / SIZE, np.array([45, 27], np.float32) / SIZE)
+    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": plan}, reach_threshold=10.0,
+                              safety_radius=None, fallback_policy=wall_pusher, skip_after=1, seed=0,
+                              retreat="goal", replan=replan)
+    run(env, ctrl, limit=80)
+    assert asked and asked[0] == (True, 1)  # stuck while going back: a new plan
+    assert ctrl.stats.retreats == 1 and not ctrl._back
+
+
 def test_settling_needs_the_agent_near_now_not_only_once():
     """An agent that read near once and is now pressed against a wall with its waypoint behind it
     (reading far) has not settled beside the waypoint."""
