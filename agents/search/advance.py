@@ -28,7 +28,7 @@ goal, ``"any"``: on every leg but the first. Counted reached from up to a metre 
 corner can be left on the wrong side of the corner, and an agent found stuck on the next leg has
 mostly slid further along the wall the wrong way; from there neither policy may reach its target
 (Apartment3: a wall end at (10, 2.2) m with a goal behind it, where an agent of a traced run tried
-three approaches and arrived at step 73; going back, it arrives at step 37).
+three approaches and arrived at step 73; going back, it arrives at step 31).
 """
 from __future__ import annotations
 

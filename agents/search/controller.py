@@ -47,7 +47,7 @@ current waypoint's observation. Rules, all from observations only:
 - **fallback** (optional): an agent stuck ``skip_after`` times on the way to one target
   hands that leg over to ``fallback_policy`` until it reaches its next waypoint (e.g. a
   constrained policy that will not approach a goal beside furniture hands over to the
-  unconstrained one);
+  unconstrained one); with ``retreat``, it goes back to the waypoint it set off from first;
 - **replan** (optional): a callback asked for a new plan when an agent is stuck (above), or
   when it falls more than ``replan_lag`` steps behind its plan.
 """
