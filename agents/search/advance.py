@@ -130,7 +130,6 @@ class AdvanceRules:
         self.stats.off_course += 1
         return False
 
-
     def _go_back(self, agent: str) -> None:
         """With ``retreat``: send ``agent`` back to the waypoint it set off from on its current leg (none
         on its first leg, nor while it already goes back; with ``"goal"``, only on its leg to the goal)."""
