@@ -21,7 +21,8 @@ current waypoint's observation. Rules, all from observations only:
   agents that still have to pass it (an agent parked at its goal is an immovable obstacle, and
   one that parks in a doorway before another has gone through shuts that one out for good);
   same patience as the plan order. Where the two orders meet (the plan sends the parking agent
-  first, the goal order holds it for the other), the other agent goes first;
+  first, the goal order holds it for the other), the other agent goes first, and so where the
+  holds of several agents close a cycle (:mod:`agents.search.ordering`);
 - **clear goal** (optional, ``goal_clearance``; :mod:`agents.search.clearance`): an agent near
   its goal stands still while another agent free to leave stands by that goal (parked, it would
   shut that one in); the one it holds for no longer waits for it by the plan's or goal order;
@@ -62,6 +63,7 @@ import numpy as np
 
 from .advance import AdvanceRules
 from .clearance import GoalClearance, pair_proximity
+from .ordering import OrderRules
 
 PolicyFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 PairFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -112,6 +114,8 @@ class ControllerStats:
     retreats: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
     stalls: int = 0
+    #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.ordering`)
+    cycles: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
     #: per agent, why it stood still on the last step: ``"wait"`` (its plan's departure time),
     #: ``"yield:<agent>"`` (another agent with priority was too close), ``"wait:<agent>"`` (the plan
@@ -121,7 +125,7 @@ class ControllerStats:
     leg_escapes: Dict[str, int] = field(default_factory=dict)
 
 
-class WaypointController(GoalClearance, AdvanceRules):
+class WaypointController(GoalClearance, AdvanceRules, OrderRules):
     """Turns per-agent plans into actions, one environment step at a time.
 
     Args:
@@ -273,6 +277,7 @@ class WaypointController(GoalClearance, AdvanceRules):
         self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
         #: agent -> the agent it holds its parking for (goal order), as of its last check
         self._parks_after: Dict[str, str] = {}
+        self._waiting: Dict[str, str] = {}
         for name, v in (("goal_clearance", goal_clearance), ("push_margin", push_margin)):
             if v is not None and not v > 0:
                 raise ValueError(f"{name} must be > 0 or None, got {v!r}")
@@ -312,45 +317,6 @@ class WaypointController(GoalClearance, AdvanceRules):
             return 0
         return max(0, self.t - int(plan.depart_times[k - 1]))
 
-    def _waits_on(self, agent: str, q: int) -> Optional[str]:
-        """The agent ``agent`` must wait for before setting off for its target ``q`` (``None``: it may go)."""
-        self._parks_after.pop(agent, None)
-        deps = self._after[agent].get(q, [])
-        for b, r in list(deps):
-            if b not in self._live or self.index.get(b, 0) > r:
-                deps.remove((b, r))  # reached (or arrived): satisfied for good
-                continue
-            # b holds its parking until this agent has passed its goal: this one goes first
-            if self._patience_over(agent, q, b) or agent in (self._parks_after.get(b), self._clearing.get(b)):
-                deps.remove((b, r))
-                continue
-            return b
-        if self.goal_order is None or q != len(self.plans[agent].waypoints):
-            return None
-        for b, r in self.goal_order(agent):
-            if b == agent or b not in self._live or self.index.get(b, 0) > r or b in self._gave_up[agent]:
-                continue
-            if self._clearing.get(b) == agent:  # b will not park while this one stands by b's goal
-                continue
-            if self._patience_over(agent, q, b):
-                self._gave_up[agent].add(b)
-                continue
-            self._parks_after[agent] = b
-            return b
-        return None
-
-    def _patience_over(self, agent: str, q: int, b: str) -> bool:
-        """Whether ``agent``, held at target ``q`` by ``b``, has waited ``order_patience`` steps in which
-        ``b`` reached no new target (then it stops waiting on ``b``)."""
-        seen = self._blocked.get(agent)
-        if seen is None or seen[:2] != (q, b) or self.index[b] != seen[3]:
-            self._blocked[agent] = (q, b, self.t, self.index[b])
-            return False
-        if self.t - seen[2] >= self.order_patience:  # it does not progress: stop waiting on it
-            self._blocked.pop(agent, None)
-            return True
-        return False
-
     def act(self, observations: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
         """Actions for the live agents, given each agent's current observation (the ``observation`` entry)."""
         live = [a for a in observations if a in self.plans]
@@ -385,6 +351,7 @@ class WaypointController(GoalClearance, AdvanceRules):
                         waiting[a] = other
                         continue
                     waiting.pop(a, None)
+                    self._waiting.pop(a, None)
                     self._blocked.pop(a, None)
                     self.index[a] = k + 1
                     self._stuck_count[a] = 0
@@ -395,6 +362,7 @@ class WaypointController(GoalClearance, AdvanceRules):
                     moved = True
             if not moved:
                 break
+        self._waiting = waiting
         goals = np.stack([self.current_goal(a) for a in live])
         actions = np.asarray(self.policy(obs, goals), dtype=np.float32).reshape(len(live), -1)
         if self.fallback_policy is not None:

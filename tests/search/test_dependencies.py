@@ -7,6 +7,7 @@ import safe_mapf_envs
 from agents.search import SearchPolicy
 from agents.search.controller import AgentPlan, WaypointController
 from agents.search.dependencies import plan_dependencies, proximity_relation
+from agents.search.ordering import hold_cycle
 
 
 def test_the_agent_the_plan_sends_second_waits_for_the_first():
@@ -113,6 +114,50 @@ def test_an_agent_that_holds_its_parking_for_another_lets_that_one_go_first():
     arrived = run_teleported(c, plans, steps=20)
     assert set(arrived) == {"a", "b"} and max(arrived.values()) < 10 and c.stats.waits < 10
     assert plans["a"].after is not None and c._after["a"] == {2: []}  # a no longer waits for b
+
+
+@pytest.mark.parametrize("c_parks_after_a", [True, False])
+def test_holds_that_close_a_cycle_of_three_agents_are_broken_at_once(c_parks_after_a):
+    """a waits on b by the plan's order, b on c, and c on a: by the goal order (c holds its parking
+    until a has gone by, traced on Apartment3's held-out hard 5-agent problem 0, where three agents at a
+    doorway stood for 36 steps until the order's patience ran out) or, given by hand, by the plan's order
+    too. The agent the parking one holds for goes first; in a cycle of plan-order waits only, the first
+    by name. Without the rule all three stand until the patience (40 steps) runs out."""
+    line = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    plans = {"a": AgentPlan(line, np.array([6.0, 0.0]), starts_at_first=True, after={2: [("b", 2)]}),
+             "b": AgentPlan(line + [0.0, 5.0], np.array([6.0, 5.0]), starts_at_first=True, after={2: [("c", 2)]}),
+             "c": AgentPlan(line[:2] + [0.0, 9.0], np.array([4.0, 9.0]), starts_at_first=True,
+                            after=None if c_parks_after_a else {2: [("a", 2)]})}
+    order = (lambda agent: [("a", 2)] if agent == "c" else []) if c_parks_after_a else None
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=40, goal_order=order)
+    arrived = run_teleported(c, plans, steps=60)
+    assert set(arrived) == {"a", "b", "c"} and max(arrived.values()) < 10 and c.stats.cycles == 1
+    first = "a"  # the one c parks after; in the plan-order cycle the first by name, a too
+    assert arrived[first] == min(arrived.values()) and arrived["b"] == max(arrived.values())
+    # the wait a gave up is gone for good; b's wait on c ended when c arrived
+    assert c._after["a"] == {2: []} and c._after["b"] == {2: []}
+
+
+def test_a_chain_of_waits_that_does_not_close_a_cycle_is_kept():
+    """a waits on b, b on c, and c does not wait: nobody goes out of turn (c, then b, then a)."""
+    line = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    plans = {"a": AgentPlan(line, np.array([6.0, 0.0]), starts_at_first=True, after={2: [("b", 2)]}),
+             "b": AgentPlan(line + [0.0, 5.0], np.array([6.0, 5.0]), starts_at_first=True, after={2: [("c", 2)]}),
+             "c": AgentPlan(line + [0.0, 9.0], np.array([6.0, 9.0]), starts_at_first=True)}
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=40)
+    arrived = run_teleported(c, plans, steps=60)
+    assert arrived["c"] < arrived["b"] < arrived["a"] and c.stats.cycles == 0
+
+
+def test_hold_cycle_follows_holds_back_to_the_agent_only():
+    holds = {"b": "c", "c": "a", "x": "y", "y": "x"}.get
+    assert hold_cycle("a", "b", holds, 10) == ["b", "c"]
+    assert hold_cycle("a", "x", holds, 10) is None  # a cycle that a is not in
+    assert hold_cycle("a", "c", holds, 10) == ["c"]
+    assert hold_cycle("a", "b", holds, 1) is None  # longer than the limit
+    assert hold_cycle("a", "d", holds, 10) is None  # d holds for nobody
 
 
 def test_dependencies_follow_the_plan_and_never_wait_in_a_cycle():
