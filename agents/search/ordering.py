@@ -15,10 +15,11 @@ controller keeps the state these methods read and write.
   agent stops waiting when the hold that closes the cycle is one for its sake: the agent before it
   in the cycle holds its parking for it (goal order) or stands still to clear its goal for it;
   where no hold of the cycle is of these kinds, the first agent of the cycle by name stops
-  waiting. Two agents waiting on each other are the shortest such cycle. (Apartment3: three agents
-  at a doorway waited on each other for 36 steps, one held by the plan order for a second one,
-  that one for a third, and the third holding its parking for the first, until the patience ran
-  out.)
+  waiting; an agent that holds its parking stops only for the reason before (parked, it could
+  shut the others in). Two agents waiting on each other are the shortest such cycle. (Apartment3:
+  three agents at a doorway waited on each other for 33 steps, one held by the plan order for a
+  second one, that one for a third, and the third holding its parking for the first, until the
+  patience ran out.)
 """
 from __future__ import annotations
 
@@ -76,7 +77,7 @@ class OrderRules:
                 continue
             if self._clearing.get(b) == agent:  # b will not park while this one stands by b's goal
                 continue
-            if self._patience_over(agent, q, b) or self._goes_first(agent, b):
+            if self._patience_over(agent, q, b) or self._goes_first(agent, b, parking=True):
                 self._gave_up[agent].add(b)
                 continue
             self._parks_after[agent] = b
@@ -103,9 +104,10 @@ class OrderRules:
         """Whether ``x`` holds for ``agent``'s sake: it parks after it, or clears its goal for it."""
         return agent in (self._parks_after.get(x), self._clearing.get(x))
 
-    def _goes_first(self, agent: str, b: str) -> bool:
-        """Whether ``agent`` stops waiting on ``b`` because the holds close a cycle (module docstring)."""
-        if self._for_its_sake(b, agent):
+    def _goes_first(self, agent: str, b: str, parking: bool = False) -> bool:
+        """Whether ``agent`` stops waiting on ``b`` because the holds close a cycle (module docstring);
+        ``parking``: it waits on ``b`` by the goal order (it holds its parking for ``b``'s sake)."""
+        if not parking and self._for_its_sake(b, agent):
             return True
         cycle = hold_cycle(agent, b, self._holds, len(self._live))
         if cycle is None:
@@ -113,10 +115,10 @@ class OrderRules:
         if self._for_its_sake(cycle[-1], agent):
             self.stats.cycles += 1
             return True
-        members = [agent, *cycle]
-        if any(self._for_its_sake(x, y) for x, y in zip(members, members[1:] + members[:1])):
+        links = zip(cycle, cycle[1:] + [agent])
+        if parking or any(self._for_its_sake(x, y) for x, y in links):
             return False  # the cycle is broken at the agent a parking or clearing one holds for
-        if agent == min(members):
+        if agent == min([agent, *cycle]):
             self.stats.cycles += 1
             return True
         return False

@@ -139,6 +139,26 @@ def test_holds_that_close_a_cycle_of_three_agents_are_broken_at_once(c_parks_aft
     assert c._after["a"] == {2: []} and c._after["b"] == {2: []}
 
 
+def test_an_agent_holding_its_parking_keeps_holding_in_a_cycle_whatever_the_names():
+    """b waits on a by the plan's order from the first step, until a has set off for its goal; once a
+    is at its last waypoint it holds its parking for b (goal order). The two holds close a cycle: b
+    goes first, and a keeps holding although it is first by name (Apartment0, 20 agents, hard problem
+    0: breaking such a cycle at the agent first by name parked it before the other had passed, and
+    that one was blocked for the rest of the run)."""
+    wa = np.array([[0.0, 5.0], [2.0, 5.0], [4.0, 5.0]])
+    wb = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    plans = {"a": AgentPlan(wa, np.array([6.0, 1.0]), starts_at_first=True),
+             "b": AgentPlan(wb, np.array([6.0, 0.0]), starts_at_first=True, after={1: [("a", 2)]})}
+    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
+                           stuck_window=None, order_patience=40,
+                           goal_order=lambda agent: [("b", 1)] if agent == "a" else [])
+    for _ in range(20):  # every agent stands on the target it heads for at each step
+        c.act({x: c.current_goal(x) for x in plans})
+        if c.index["a"] == 3:  # a set off for its goal: b has passed its target 1
+            break
+    assert c.index == {"a": 3, "b": 2} and c._gave_up["a"] == set() and c.stats.cycles == 0
+
+
 def test_a_chain_of_waits_that_does_not_close_a_cycle_is_kept():
     """a waits on b, b on c, and c does not wait: nobody goes out of turn (c, then b, then a)."""
     line = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
