@@ -114,7 +114,8 @@ class ControllerStats:
     retreats: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
     stalls: int = 0
-    #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.ordering`)
+    #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.ordering`; not
+    #: counted: the two-agent case where the plan order meets a parking or clearing hold)
     cycles: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)
     #: per agent, why it stood still on the last step: ``"wait"`` (its plan's departure time),
