@@ -112,6 +112,8 @@ class ControllerStats:
     fallback_steps: int = 0
     #: legs an agent went back to the waypoint it set off from before the fallback drove them (``retreat``)
     retreats: int = 0
+    #: legs handed to the fallback policy at their start (``fallback_beyond``)
+    handovers: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
     stalls: int = 0
     #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.ordering`; not
@@ -220,6 +222,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         push_margin: Optional[float] = None,
         advance_slack: Optional[float] = None,
         retreat: Optional[str] = None,
+        fallback_beyond: Optional[float] = None,
     ) -> None:
         if stuck_window is not None and stuck_window < 1:
             raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
@@ -289,6 +292,11 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         if retreat not in (None, "goal", "any"):
             raise ValueError(f"retreat must be None, 'goal' or 'any', got {retreat!r}")
         self.retreat = retreat
+        if fallback_beyond is not None and not fallback_beyond > 0:
+            raise ValueError(f"fallback_beyond must be > 0 or None, got {fallback_beyond!r}")
+        self.fallback_beyond = fallback_beyond
+        #: per agent: the leg (plan, target index) whose start the ``fallback_beyond`` test has read
+        self._leg_read: Dict[str, Tuple[int, int]] = {}
         self._back: Dict[str, int] = {}
         self._back_best: Dict[str, Tuple[int, float, int]] = {}
         self._approach: Dict[str, Tuple[int, float, int]] = {}
@@ -364,6 +372,8 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if not moved:
                 break
         self._waiting = waiting
+        if self.fallback_beyond is not None and self.fallback_policy is not None:
+            self._hand_over_far_legs(live, to_target)
         goals = np.stack([self.current_goal(a) for a in live])
         actions = np.asarray(self.policy(obs, goals), dtype=np.float32).reshape(len(live), -1)
         if self.fallback_policy is not None:
@@ -506,6 +516,20 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if self._sidesteps(a):
                 self._side[a] = -self._side[a]
             actions[i] = self._escape_step(a, actions[i])
+
+    def _hand_over_far_legs(self, live: List[str], to_target: Dict[str, float]) -> None:
+        """Hand a leg to ``fallback_policy`` from its start where the driver's critic puts its target
+        beyond ``fallback_beyond`` (the graph's critic made it one edge: the driver will not go there)."""
+        assert self.fallback_beyond is not None
+        for a in live:
+            leg = (id(self.plans[a]), self.index[a])
+            d = to_target.get(a)
+            if a in self._back or d is None or self._leg_read.get(a) == leg:
+                continue
+            self._leg_read[a] = leg
+            if d > self.fallback_beyond and self._fallback_at.get(a) != self._reached[a]:
+                self._fallback_at[a] = self._reached[a]
+                self.stats.handovers += 1
 
     def _sidesteps(self, agent: str) -> bool:
         """Whether ``agent``'s escapes are sidesteps (see ``escape`` and ``sidestep_after``)."""

@@ -13,7 +13,9 @@
   node it set off from and the nodes within ``detach_radius`` of it are no longer linked to its
   goal (the critic takes them for places beside the goal). Routes may still pass them.
 - Then it plans alone from where it stands, trying in turn: around the failed waypoints and their
-  neighbourhoods; around the failed waypoints only (the neighbourhood held the only doorway);
+  neighbourhoods (but around the failed waypoints alone where that route is more than ``ban_detour``
+  predicted steps shorter: the neighbourhood held the short way, a doorway's other nodes); around
+  the failed waypoints only (the neighbourhood held the only doorway);
   localised (its start attached to the nodes the critic puts nearest), with a berth of 1, 0.85 or
   0.7 ban radii around the goals of parked agents, then past them. It tries these first without
   the detached links, then with them back (where it stands right by the node it failed to reach,
@@ -27,6 +29,7 @@
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
@@ -45,6 +48,8 @@ class StuckReplanning:
     memory: Any
     budget: Optional[float]
     ban_radius: float
+    ban_detour: float
+    narrow_replans: int
     detach_radius: Optional[float]
     agents: List[str]
     routes: Dict[str, List[int]]
@@ -143,16 +148,28 @@ class StuckReplanning:
             ([], [], self.memory.removed(), False, detached), ([], [], self.memory.removed(), False, none),
             ([], [], None, False, none)]
         tried = []
-        for banned, exclude, exclude_edges, avoid, detach in attempts:
+
+        def attempt(banned, exclude, exclude_edges, avoid, detach) -> Any:
+            return p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
+                          exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
+                          detached=detach[0], goal_detached=detach[1])
+
+        for j, (banned, exclude, exclude_edges, avoid, detach) in enumerate(attempts):
             key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at),
                    detach)
             if key in tried:
                 continue
             tried.append(key)
-            sub = p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
-                         exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None, detached=detach[0],
-                         goal_detached=detach[1])
+            sub = attempt(banned, exclude, exclude_edges, avoid, detach)
             if sub.solved:
+                if math.isfinite(self.ban_detour) and j % len(plans) == 0 and j < 2 * len(plans):
+                    # around the neighbourhood: unless around the failed waypoints alone is much shorter
+                    narrow = attempts[j + 1]
+                    alt = attempt(*narrow)
+                    if alt.solved and alt.soc is not None and sub.soc is not None \
+                            and alt.soc + self.ban_detour < sub.soc:
+                        sub, banned = alt, narrow[0]
+                        self.narrow_replans += 1
                 self._banned[agent] = banned
                 break
         if sub.solved:

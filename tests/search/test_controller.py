@@ -672,3 +672,37 @@ def test_with_push_margin_an_agent_pushed_while_it_yields_goes_first_and_keeps_i
 def test_push_margin_is_checked():
     with pytest.raises(ValueError, match="push_margin must be"):
         WaypointController(straight_policy, euclid_steps, {}, push_margin=-1.0)
+
+
+def test_a_leg_the_drivers_critic_puts_out_of_reach_is_handed_to_the_fallback_at_its_start():
+    """The graph's critic made the first leg one edge; the driver's critic reads it far beyond that (it will
+    not go there): with ``fallback_beyond`` the fallback drives that leg from its first step, without the
+    driver being found stuck first; the next leg, within reach, the driver drives again."""
+    wp = np.array([[12.0, 5.0]], np.float32) / SIZE
+    goal = np.array([25, 5], np.float32) / SIZE
+
+    def main(obs, goal_):
+        out = straight_policy(obs, goal_)
+        out[goal_[:, 0] * SIZE < 15] = 0.0  # refuses the first leg
+        return out
+
+    def critic(obs, goal_):
+        d = euclid_steps(obs, goal_)
+        return np.where((goal_[:, 0] * SIZE < 15) & (d > 1.5), 40.0, d)
+
+    arrivals = {}
+    for beyond in (None, 20.0):
+        env = make_env([(5.0, 5.0)], [(25.0, 5.0)])
+        ctrl = WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, reach_threshold=1.0,
+                                  safety_radius=None, fallback_policy=straight_policy, seed=0, fallback_beyond=beyond)
+        trail = run(env, ctrl, limit=120)["agent_0"]
+        assert np.linalg.norm(trail[-1] - [25, 5]) <= 1.0
+        arrivals[beyond] = len(trail)
+        if beyond is None:  # found stuck first, then handed over
+            assert ctrl.stats.handovers == 0 and ctrl.stats.escapes >= 1 and ctrl.stats.fallbacks == 1
+        else:  # handed over at once: never stuck; the fallback drove the 7 units of the first leg only
+            assert ctrl.stats.handovers == 1 and ctrl.stats.escapes == 0 and ctrl.stats.fallbacks == 0
+            assert 5 <= ctrl.stats.fallback_steps <= 9
+    assert arrivals[20.0] < arrivals[None]
+    with pytest.raises(ValueError, match="fallback_beyond"):
+        WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, fallback_beyond=0.0)

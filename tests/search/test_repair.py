@@ -1,5 +1,7 @@
 """A graph that repairs itself: the edge memory, failed edges left out of later plans, localisation of a
 lost agent, and save/load of the repaired graph (stand-in critic, no env, no torch)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -485,3 +487,52 @@ def test_an_agent_that_lost_its_goal_on_the_last_leg_links_no_more_nodes_beside_
     beside = {i for i in range(len(nodes)) if min(D[i, source], D[source, i]) < 3.0} | {source}
     assert detached[None] == set() and detached[3.0] == beside and corner <= beside
     assert lasts[3.0] not in corner  # a way through the room
+
+
+class TwoDoorWorld(OpenWorld):
+    """A wall at x = 5 with a wide door (y 4-6) and a narrow one far up (y 9-10); the stand-in critic
+    measures straight lines that cross the wall only through a door (100 steps where they do not)."""
+
+    def _seg(self, a, b):
+        a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
+        length = np.linalg.norm(b - a, axis=-1)
+        dx = b[..., 0] - a[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (5.0 - a[..., 0]) / dx
+            yc = a[..., 1] + s * (b[..., 1] - a[..., 1])
+        through = ((yc >= 4.0) & (yc <= 6.0)) | ((yc >= 9.0) & (yc <= 10.0))
+        crosses = (dx != 0) & (s > 0) & (s < 1) & ~through
+        return np.where(crosses, 100.0, np.maximum(length, 1.0)), np.zeros_like(length)
+
+
+@pytest.mark.parametrize("ban_detour", [math.inf, 0.0])
+def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourhood_holds_the_short_way(ban_detour):
+    """Stuck on the way to one of two nodes in a wide door: banning the failed node's neighbourhood bans the
+    door's other node too and sends the agent round by the far door; with ``ban_detour`` the replan keeps
+    clear of the failed node alone where that is more than ``ban_detour`` predicted steps shorter."""
+    world = TwoDoorWorld()
+    side = [(x, y) for x in (1.5, 3.5) for y in (1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0)]
+    doors = [(5.0, 4.3), (5.0, 5.7), (5.0, 9.5)]
+    nodes = np.array(side + doors + [(10.0 - x, y) for x, y in side], np.float32)
+    low, high, far = len(side), len(side) + 1, len(side) + 2
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
+                          ban_detour=ban_detour)
+    start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
+    policy.predict({"observation": start, "desired_goal": goal})
+    route = list(policy.routes["agent_0"])
+    assert low in route and far not in route  # through the wide door, by its lower node
+    # drive along the route until the leg into the door, then stand at that leg's start until it replans
+    while policy.leg("agent_0").target != low:
+        policy.predict({"observation": nodes[policy.leg("agent_0").target], "desired_goal": goal})
+    stand_until_replans(policy, {"observation": nodes[policy.leg("agent_0").source], "desired_goal": goal}, 1)
+    new = policy.routes["agent_0"]
+    assert low not in new
+    if ban_detour == math.inf:  # the whole wide door is banned: round by the far one
+        assert far in new and high not in new and policy.narrow_replans == 0
+    else:
+        assert high in new and far not in new and policy.narrow_replans == 1
+    assert SearchPolicy(planner, world).ban_detour == math.inf  # vector agents: never, by default
+    with pytest.raises(ValueError, match="ban_detour"):
+        SearchPolicy(planner, world, ban_detour=-1.0)
