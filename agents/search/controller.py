@@ -192,6 +192,10 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         retreat: an agent whose leg is handed to ``fallback_policy`` goes back to the waypoint it
             set off from first: ``"goal"`` on its leg to the goal, ``"any"`` on every leg but the
             first (*back first* in :mod:`agents.search.advance`; ``None``: never).
+        fallback_beyond: a leg whose target ``distance`` puts beyond this many predicted steps at the
+            leg's start goes to ``fallback_policy`` at once, without waiting for the agent to be found
+            stuck (the plan made it one edge by another critic's reading, and the driver will not go
+            there); ``None``: off.
     """
 
     def __init__(
