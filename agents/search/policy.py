@@ -40,7 +40,6 @@ from .graph import NodePairwise, ProblemGraph
 from .models import (
     buffer_observations,
     check_models,
-    default_ban_detour,
     default_controller_options,
     default_hold,
     default_reach_threshold,
@@ -118,9 +117,9 @@ class SearchPolicy(StuckReplanning):
         ban_detour: where keeping clear of the failed waypoint's neighbourhood makes a stuck agent's new
             route more than this many predicted steps longer than keeping clear of that waypoint alone,
             the replan keeps clear of the waypoint alone (a doorway holds several nodes, and the one
-            the agent failed on may lie against the wall's end); ``inf``: never. Default
-            :func:`default_ban_detour` of the judging model: 0 for panorama agents (whenever it is
-            shorter), ``inf`` for vector ones.
+            the agent failed on may lie against the wall's end); ``inf`` (the default): never. Where
+            the agent failed at a wormhole, the failed node's neighbours are look-alikes too, and
+            a narrow replan sends it to the next one (see :mod:`agents.search.replanning`).
         detach_radius: where an agent set off for a node (or its goal) as one edge away and the
             critic now puts it far, the nodes within this many predicted steps of that node (of the
             node it set off from) are no longer linked to its start (its goal) in its replans of the
@@ -152,7 +151,7 @@ class SearchPolicy(StuckReplanning):
         safety_radius: Optional[float] = 2.0,
         replan_when_stuck: bool = True,
         ban_radius: float = 3.0,
-        ban_detour: Optional[float] = None,
+        ban_detour: float = math.inf,
         detach_radius: Optional[float] = 3.0,
         park_clearance: Optional[float] = None,
         seed: Optional[int] = 0,
@@ -186,10 +185,8 @@ class SearchPolicy(StuckReplanning):
         self.safety_radius = safety_radius
         self.replan_when_stuck = bool(replan_when_stuck)
         self.ban_radius = float(ban_radius)
-        if ban_detour is None:
-            ban_detour = default_ban_detour(judge)
         if not ban_detour >= 0:
-            raise ValueError(f"ban_detour must be >= 0 (inf: never) or None, got {ban_detour!r}")
+            raise ValueError(f"ban_detour must be >= 0 (inf: never), got {ban_detour!r}")
         self.ban_detour = float(ban_detour)
         if detach_radius is not None and not detach_radius >= 0:
             raise ValueError(f"detach_radius must be >= 0 or None, got {detach_radius!r}")

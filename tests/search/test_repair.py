@@ -533,6 +533,6 @@ def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourho
         assert far in new and high not in new and policy.narrow_replans == 0
     else:
         assert high in new and far not in new and policy.narrow_replans == 1
-    assert SearchPolicy(planner, world).ban_detour == math.inf  # vector agents: never, by default
+    assert SearchPolicy(planner, world).ban_detour == math.inf  # never, by default
     with pytest.raises(ValueError, match="ban_detour"):
         SearchPolicy(planner, world, ban_detour=-1.0)

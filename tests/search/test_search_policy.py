@@ -221,21 +221,6 @@ def test_controller_defaults_follow_the_observation_type(agent):
     assert PANORAMA_CONTROLLER_OPTIONS["fallback_beyond"] == 14.0
 
 
-def test_replans_keep_clear_of_the_failed_waypoint_alone_for_panorama_agents_only(agent):
-    import math
-    from types import SimpleNamespace
-
-    from gymnasium import spaces
-
-    from agents.search.models import PANORAMA_BAN_DETOUR, default_ban_detour
-
-    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
-    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
-    assert default_ban_detour(pano) == PANORAMA_BAN_DETOUR == 0.0 and default_ban_detour(agent) == math.inf
-    assert SearchPolicy(None, agent).ban_detour == math.inf
-    assert SearchPolicy(None, agent, ban_detour=2.0).ban_detour == 2.0
-
-
 def test_the_planner_admits_longer_and_costlier_detours_back_for_panorama_agents_only(agent, nodes):
     from types import SimpleNamespace
 
