@@ -300,7 +300,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             raise ValueError(f"fallback_beyond must be > 0 or None, got {fallback_beyond!r}")
         self.fallback_beyond = fallback_beyond
         #: per agent: the leg (plan, target index) whose start the ``fallback_beyond`` test has read
-        self._leg_read: Dict[str, Tuple[int, int]] = {}
+        self._leg_read: Dict[str, Tuple[AgentPlan, int]] = {}
         self._back: Dict[str, int] = {}
         self._back_best: Dict[str, Tuple[int, float, int]] = {}
         self._approach: Dict[str, Tuple[int, float, int]] = {}
@@ -526,11 +526,12 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         beyond ``fallback_beyond`` (the graph's critic made it one edge: the driver will not go there)."""
         assert self.fallback_beyond is not None
         for a in live:
-            leg = (id(self.plans[a]), self.index[a])
+            plan, k = self.plans[a], self.index[a]
             d = to_target.get(a)
-            if a in self._back or d is None or self._leg_read.get(a) == leg:
+            read = self._leg_read.get(a)
+            if a in self._back or d is None or read is not None and read[0] is plan and read[1] == k:
                 continue
-            self._leg_read[a] = leg
+            self._leg_read[a] = (plan, k)
             if d > self.fallback_beyond and self._fallback_at.get(a) != self._reached[a]:
                 self._fallback_at[a] = self._reached[a]
                 self.stats.handovers += 1
