@@ -14,14 +14,17 @@ class WallWorld:
     that a straight line only passes if it starts or ends in it; the stand-in critic measures straight
     lines that do not cross the wall (100 steps if they do), its policy heads straight for the goal."""
 
+    def _through_door(self, a, b, s):
+        """Whether the lines ``a -> b``, crossing x = 5 at ``s`` of their length, pass a door."""
+        return (np.linalg.norm(a - 5.0, axis=-1) < 0.3) | (np.linalg.norm(b - 5.0, axis=-1) < 0.3)
+
     def _seg(self, a, b):
         a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
         length = np.linalg.norm(b - a, axis=-1)
         dx = b[..., 0] - a[..., 0]
         with np.errstate(divide="ignore", invalid="ignore"):
             s = (5.0 - a[..., 0]) / dx
-        in_door = (np.linalg.norm(a - 5.0, axis=-1) < 0.3) | (np.linalg.norm(b - 5.0, axis=-1) < 0.3)
-        crosses = (dx != 0) & (s > 0) & (s < 1) & ~in_door
+            crosses = (dx != 0) & (s > 0) & (s < 1) & ~self._through_door(a, b, s)
         return np.where(crosses, 100.0, np.maximum(length, 1.0)), np.zeros_like(length)
 
     def pairwise(self, a, b, aggregate="max"):
@@ -489,20 +492,13 @@ def test_an_agent_that_lost_its_goal_on_the_last_leg_links_no_more_nodes_beside_
     assert lasts[3.0] not in corner  # a way through the room
 
 
-class TwoDoorWorld(OpenWorld):
+class TwoDoorWorld(WallWorld):
     """A wall at x = 5 with a wide door (y 4-6) and a narrow one far up (y 9-10); the stand-in critic
     measures straight lines that cross the wall only through a door (100 steps where they do not)."""
 
-    def _seg(self, a, b):
-        a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
-        length = np.linalg.norm(b - a, axis=-1)
-        dx = b[..., 0] - a[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (5.0 - a[..., 0]) / dx
-            yc = a[..., 1] + s * (b[..., 1] - a[..., 1])
-        through = ((yc >= 4.0) & (yc <= 6.0)) | ((yc >= 9.0) & (yc <= 10.0))
-        crosses = (dx != 0) & (s > 0) & (s < 1) & ~through
-        return np.where(crosses, 100.0, np.maximum(length, 1.0)), np.zeros_like(length)
+    def _through_door(self, a, b, s):
+        y = a[..., 1] + s * (b[..., 1] - a[..., 1])  # where the line crosses x = 5
+        return ((y >= 4.0) & (y <= 6.0)) | ((y >= 9.0) & (y <= 10.0))
 
 
 @pytest.mark.parametrize("ban_detour", [math.inf, 0.0])
