@@ -149,7 +149,7 @@ class StuckReplanning:
             ([], [], None, False, none)]
         tried = []
 
-        def attempt(banned, exclude, exclude_edges, avoid, detach) -> Any:
+        def attempt(exclude, exclude_edges, avoid, detach) -> Any:
             return p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
                           exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
                           detached=detach[0], goal_detached=detach[1])
@@ -160,12 +160,13 @@ class StuckReplanning:
             if key in tried:
                 continue
             tried.append(key)
-            sub = attempt(banned, exclude, exclude_edges, avoid, detach)
+            sub = attempt(exclude, exclude_edges, avoid, detach)
             if sub.solved:
-                if math.isfinite(self.ban_detour) and j % len(plans) == 0 and j < 2 * len(plans):
-                    # around the neighbourhood: unless around the failed waypoints alone is much shorter
+                # around the neighbourhood (the first of ``plans``, with or without the detached links), unless
+                # around the failed waypoints alone (the next attempt) is much shorter
+                if math.isfinite(self.ban_detour) and j in (0, len(plans)):
                     narrow = attempts[j + 1]
-                    alt = attempt(*narrow)
+                    alt = attempt(*narrow[1:])
                     if alt.solved and alt.soc is not None and sub.soc is not None \
                             and alt.soc + self.ban_detour < sub.soc:
                         sub, banned = alt, narrow[0]
