@@ -52,6 +52,8 @@ class Method:
         fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
             leg once its own policy is stuck there (see
             :class:`~agents.search.controller.WaypointController`).
+        repair_routes: an agent about to set off along an edge another agent failed on in the run
+            plans around it first (:class:`~agents.search.policy.SearchPolicy`'s ``repair_routes``).
     """
 
     name: str
@@ -62,6 +64,7 @@ class Method:
     budget: Optional[float] = None
     hold: Optional[str] = None
     fallback: Optional[str] = None
+    repair_routes: bool = False
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -152,7 +155,7 @@ def execute(
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
                           seed=seed, fallback_model=models[method.fallback] if method.fallback else None,
-                          memory=memory if method.search else None)
+                          memory=memory if method.search else None, repair_routes=method.repair_routes)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
@@ -180,7 +183,7 @@ def execute(
                  "predicted_cost": plan.predicted_cost, "nodes": plan.nodes, "replan_time": policy.replan_time}
     stats = policy.stats
     extra.update(yields=stats.yields, waits=stats.waits, escapes=stats.escapes, skips=stats.skips,
-                 replans=stats.replans)
+                 replans=stats.replans, route_repairs=policy.route_repairs)
     if method.search:
         extra["memory"] = policy.memory
     trajectories = np.stack(traj)

@@ -120,6 +120,10 @@ class SearchPolicy(StuckReplanning):
             the agent failed on may lie against the wall's end); ``inf`` (the default): never. Where
             the agent failed at a wormhole, the failed node's neighbours are look-alikes too, and
             a narrow replan sends it to the next one (see :mod:`agents.search.replanning`).
+        repair_routes: an agent about to set off along an edge that another agent failed on in this
+            episode (or that the memory removed meanwhile) plans anew from where it stands first (see
+            :mod:`agents.search.replanning`); off by default: on the validation problems it saves
+            little cost and loses a few runs (see the planning docs).
         detach_radius: where an agent set off for a node (or its goal) as one edge away and the
             critic now puts it far, the nodes within this many predicted steps of that node (of the
             node it set off from) are no longer linked to its start (its goal) in its replans of the
@@ -152,6 +156,7 @@ class SearchPolicy(StuckReplanning):
         replan_when_stuck: bool = True,
         ban_radius: float = 3.0,
         ban_detour: float = math.inf,
+        repair_routes: bool = False,
         detach_radius: Optional[float] = 3.0,
         park_clearance: Optional[float] = None,
         seed: Optional[int] = 0,
@@ -188,6 +193,7 @@ class SearchPolicy(StuckReplanning):
         if not ban_detour >= 0:
             raise ValueError(f"ban_detour must be >= 0 (inf: never), got {ban_detour!r}")
         self.ban_detour = float(ban_detour)
+        self.repair_routes = bool(repair_routes)
         if detach_radius is not None and not detach_radius >= 0:
             raise ValueError(f"detach_radius must be >= 0 or None, got {detach_radius!r}")
         self.detach_radius = detach_radius
@@ -335,6 +341,9 @@ class SearchPolicy(StuckReplanning):
         self.replan_time = 0.0
         #: replans of the episode that kept clear of the failed waypoints alone (``ban_detour``)
         self.narrow_replans = 0
+        #: replans of the episode before a leg along an edge the memory removed meanwhile (``repair_routes``)
+        self.route_repairs = 0
+        self._leg_checked: Dict[str, Tuple[AgentPlan, int]] = {}
 
     @property
     def stats(self) -> ControllerStats:
@@ -401,6 +410,8 @@ class SearchPolicy(StuckReplanning):
         assert self.controller is not None
         self._last_obs.update(current)
         self._last_names = set(current)
+        if self.repair_routes and self.planner is not None and self.replan_when_stuck:
+            self._repair_routes(current)
         actions = self.controller.act(current)
         self._record_progress()
         if single:

@@ -26,6 +26,13 @@
 - A waypoint it failed on twice that the new route cannot avoid, it heads past
   (:func:`~agents.search.repair.past_failed_waypoints`, with the critic's distance where the
   problem graph holds only a bound: beyond ``d_max``).
+
+With ``repair_routes``, what one agent learns the others use at once: an agent about to set off
+along an edge that another agent failed on in the episode (one of the edges recorded with it), or
+that the memory removed meanwhile, plans anew from where it stands. It tries in turn the replans
+above but the last (over every edge), leaving out the edges every agent failed on, and keeps its
+route where none is solved. Its start (where it stands: the leg's source) links to none of the
+nodes those edges lead to from there.
 """
 from __future__ import annotations
 
@@ -50,6 +57,9 @@ class StuckReplanning:
     ban_radius: float
     ban_detour: float
     narrow_replans: int
+    repair_routes: bool
+    route_repairs: int
+    _leg_checked: Dict[str, Tuple[AgentPlan, int]]
     detach_radius: Optional[float]
     agents: List[str]
     routes: Dict[str, List[int]]
@@ -67,10 +77,12 @@ class StuckReplanning:
     leg: Callable[[str], Any]
     _distance: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
-    def _exclude_edges(self, agent: str) -> np.ndarray:
-        """The edges ``agent``'s replans leave out: those the memory removed and those it failed on."""
-        own = np.asarray(self._failed_edges.get(agent, []), dtype=np.int64).reshape(-1, 2)
-        return np.unique(np.concatenate([self.memory.removed(), own]), axis=0)
+    def _exclude_edges(self, agent: str, shared: bool = False) -> np.ndarray:
+        """The edges ``agent``'s replans leave out: those the memory removed and those it failed on
+        (``shared``: those any agent failed on this episode)."""
+        own = [e for b in (self.agents if shared else [agent]) for e in self._failed_edges.get(b, [])]
+        own_arr = np.asarray(own, dtype=np.int64).reshape(-1, 2)
+        return np.unique(np.concatenate([self.memory.removed(), own_arr]), axis=0)
 
     def _parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
         """Buffer nodes within ``share * ban_radius`` predicted steps of the goals of the agents that have
@@ -130,57 +142,11 @@ class StuckReplanning:
             near = near_either_way(p.D, f, self.ban_radius)
             self._failed[agent].append(f)
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
-        edges = self._exclude_edges(agent)
-        parked = self._parked_nodes(agent)
-        # where the agents that arrived stand (last seen), parked
-        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
-        # (nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may pass
-        # a parked agent, (nodes not linked to the start, nodes not linked to the goal)), tried in turn as the
-        # module's docstring says
-        plans: List[Tuple[Any, ...]] = [
-            (self._banned[agent], self._banned[agent] + parked, edges, True),
-            (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
-            *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
-            ([], parked, edges, False)]
-        none: Tuple[List[int], List[int]] = ([], [])
-        detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
-        attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
-            ([], [], self.memory.removed(), False, detached), ([], [], self.memory.removed(), False, none),
-            ([], [], None, False, none)]
-        tried = []
-
-        def attempt(exclude, exclude_edges, avoid, detach) -> Any:
-            return p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
-                          exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
-                          detached=detach[0], goal_detached=detach[1])
-
-        for j, (banned, exclude, exclude_edges, avoid, detach) in enumerate(attempts):
-            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at),
-                   detach)
-            if key in tried:
-                continue
-            tried.append(key)
-            sub = attempt(exclude, exclude_edges, avoid, detach)
-            if sub.solved:
-                # around the neighbourhood (the first of ``plans``, with or without the detached links), unless
-                # around the failed waypoints alone (the next attempt) is much shorter
-                if math.isfinite(self.ban_detour) and j in (0, len(plans)):
-                    narrow = attempts[j + 1]
-                    alt = attempt(*narrow[1:])
-                    if alt.solved and alt.soc is not None and sub.soc is not None \
-                            and alt.soc + self.ban_detour < sub.soc:
-                        sub, banned = alt, narrow[0]
-                        self.narrow_replans += 1
-                self._banned[agent] = banned
-                break
+        attempts, plans = self._attempts(agent)
+        sub, banned = self._first_solved(agent, ob, attempts, narrow=(0, plans))
         if sub.solved:
-            assert sub.problem is not None  # a solved plan keeps its problem graph
-            new = sub.agent_plans([agent], hold="waits")[agent]
-            keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent],
-                                         straight=self._straight(sub.problem))
-            new = AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
-            self.routes[agent] = [sub.nodes[0][i] for i in keep]
-            self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
+            self._banned[agent] = banned
+            new = self._install(agent, sub)
         else:  # no other way on the graph: give the waypoint up
             new = AgentPlan(current.waypoints[k + 1:], current.goal)
             self.routes[agent] = route[k + 1:]
@@ -190,5 +156,112 @@ class StuckReplanning:
         self.replan_time += time.perf_counter() - t1
         return new
 
+
+    def _attempts(self, agent: str, shared: bool = False) -> Tuple[List[Tuple[Any, ...]], int]:
+        """The replans to try for ``agent`` in turn (see the module's docstring; ``shared``: leaving out
+        the edges every agent failed on this episode, not only its own), each
+        ``(nodes banned from now on, nodes left out of this plan, edges left out, whether no edge may
+        pass a parked agent, (nodes not linked to the start, nodes not linked to the goal))``, and how
+        many of them leave out the detached links (the same number follow without them, then the
+        attempts over more edges)."""
+        edges = self._exclude_edges(agent, shared)
+        parked = self._parked_nodes(agent)
+        plans: List[Tuple[Any, ...]] = [
+            (self._banned[agent], self._banned[agent] + parked, edges, True),
+            (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
+            *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
+            ([], parked, edges, False)]
+        none: Tuple[List[int], List[int]] = ([], [])
+        detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
+        learned = self._exclude_edges(agent, True) if shared else self.memory.removed()
+        attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
+            ([], [], learned, False, detached), ([], [], learned, False, none), ([], [], None, False, none)]
+        return attempts, len(plans)
+
+    def _first_solved(self, agent: str, ob: np.ndarray, attempts: List[Tuple[Any, ...]],
+                      narrow: Tuple[int, ...] = ()) -> Tuple[Any, List[int]]:
+        """The first solved plan of ``attempts`` (:meth:`_attempts`) for ``agent`` standing at ``ob``
+        (else the last one tried), with the nodes it bans from now on. An attempt of index in
+        ``narrow`` that is solved gives way to the next one where that is ``ban_detour`` shorter."""
+        p = self.planner
+        # where the agents that arrived stand (last seen), parked
+        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
+
+        def attempt(exclude, exclude_edges, avoid, detach) -> Any:
+            return p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
+                          exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
+                          detached=detach[0], goal_detached=detach[1])
+
+        tried = []
+        sub: Any = None
+        banned: List[int] = []
+        for j, (banned, exclude, exclude_edges, avoid, detach) in enumerate(attempts):
+            key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at),
+                   detach)
+            if key in tried:
+                continue
+            tried.append(key)
+            sub = attempt(exclude, exclude_edges, avoid, detach)
+            if sub.solved:
+                # around the neighbourhood, unless around the failed waypoints alone (the next attempt) is
+                # much shorter
+                if math.isfinite(self.ban_detour) and j in narrow:
+                    alt = attempt(*attempts[j + 1][1:])
+                    if alt.solved and alt.soc is not None and sub.soc is not None \
+                            and alt.soc + self.ban_detour < sub.soc:
+                        sub, banned = alt, attempts[j + 1][0]
+                        self.narrow_replans += 1
+                break
+        return sub, banned
+
+    def _install(self, agent: str, sub: Any) -> AgentPlan:
+        """The controller's plan for ``agent`` from the solved single-agent plan ``sub``; its route,
+        heading past the waypoints it failed on twice that the route cannot avoid."""
+        assert sub.problem is not None  # a solved plan keeps its problem graph
+        new = sub.agent_plans([agent], hold="waits")[agent]
+        keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent],
+                                     straight=self._straight(sub.problem))
+        self.routes[agent] = [sub.nodes[0][i] for i in keep]
+        self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
+        self._seen_index[agent] = 0
+        return AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
+
+    def _repair_routes(self, current: Dict[str, np.ndarray]) -> None:
+        """Plan anew for each agent in ``current`` that is about to set off along an edge another agent
+        failed on in this episode (or right beside it: :func:`~agents.search.repair.edges_near`), or
+        that the memory removed since its route was made; around those edges. Where no such route
+        exists, it keeps its own."""
+        failed = {b: {(int(u), int(v)) for u, v in self._failed_edges.get(b, [])} for b in self.agents}
+        removed = {(int(u), int(v)) for u, v in self.memory.removed()}
+        if not removed and not any(failed.values()):
+            return
+        holding = self.controller.stats.holding
+        for agent, ob in current.items():
+            if agent not in self._route_graph or holding.get(agent):
+                continue  # a held agent waits for others in the plan's order: checked when it sets off
+            plan, k = self.controller.plans[agent], self.controller.index[agent]
+            seen = self._leg_checked.get(agent)
+            if seen is not None and seen[0] is plan and seen[1] == k:
+                continue
+            self._leg_checked[agent] = (plan, k)
+            leg = self.leg(agent)
+            if leg is None or leg.source is None or leg.target is None:
+                continue
+            edge = (leg.source, leg.target)
+            others = removed.union(*[f for b, f in failed.items() if b != agent])
+            if edge in failed.get(agent, set()) or edge not in others:
+                continue  # its own failed edges are left out of its replans already
+            t1 = time.perf_counter()
+            # all but the attempt over every edge; standing at the leg's source, its start links to none
+            # of the nodes those edges lead to from there
+            beyond = {v for u, v in others if u == leg.source}
+            attempts = [(*a[:4], (sorted(beyond.union(a[4][0])), a[4][1]))
+                        for a in self._attempts(agent, shared=True)[0][:-1]]
+            sub, _ = self._first_solved(agent, ob, attempts)
+            if sub is not None and sub.solved:
+                self.controller.set_plan(agent, self._install(agent, sub))
+                self._leg_checked[agent] = (self.controller.plans[agent], 0)
+                self.route_repairs += 1
+            self.replan_time += time.perf_counter() - t1
 
 __all__ = ["StuckReplanning"]

@@ -73,6 +73,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="how the search methods' agents keep to the plan: 'order' (the plan's order at shared "
                         "places, however late an agent is), 'waits' or 'all' (the plan's clock; see SearchPolicy; "
                         "default: 'order' for panorama agents, 'waits' for vector agents)")
+    p.add_argument("--repair-routes", action="store_true",
+                   help="the search methods' agents about to set off along an edge another agent failed on in the "
+                        "run plan around it first (SearchPolicy's repair_routes; default off)")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -258,6 +261,8 @@ def run(args: argparse.Namespace) -> int:
                    for m in methods]
     if args.hold is not None:
         methods = [m.with_options(hold=args.hold) if m.search else m for m in methods]
+    if args.repair_routes:
+        methods = [m.with_options(repair_routes=True) if m.search else m for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
 
@@ -312,6 +317,9 @@ def run(args: argparse.Namespace) -> int:
     if args.fallback:
         header += ("--fallback: the constrained searches hand a leg on which the constrained policy is stuck "
                    "to the unconstrained policy\n\n")
+    if args.repair_routes:
+        header += ("--repair-routes: an agent about to set off along an edge another agent failed on plans "
+                   "around it first\n\n")
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
@@ -397,8 +405,9 @@ def _run_paper(args: argparse.Namespace) -> int:
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
                              "open loop)")
-    if args.fallback:
-        raise ValueError("--fallback does not apply to --protocol paper (its agents follow their plans open loop)")
+    for flag, on in (("--fallback", args.fallback), ("--repair-routes", args.repair_routes)):
+        if on:
+            raise ValueError(f"{flag} does not apply to --protocol paper (its agents follow their plans open loop)")
     methods = get_methods(names)
     out = _check_before_work(args)
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)

@@ -273,6 +273,7 @@ def test_c_max_from_an_earlier_validation_is_checked_before_any_work(tmp_path, c
 
 
 def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_path, capsys, monkeypatch):
+    """``--fallback`` reaches the constrained searches, ``--repair-routes`` every search method."""
     import baselines.evaluation as ev
     from baselines.cli import main
 
@@ -280,20 +281,22 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
     real = ev.execute
 
     def spy(env, method, models, *args, **kwargs):
-        seen[method.name] = method.fallback
+        seen[method.name] = (method.fallback, method.repair_routes)
         return real(env, method, models, *args, **kwargs)
 
     monkeypatch.setattr(ev, "execute", spy)
     code = main(["evaluate", "--agents", "1", "--problems", "1", "--difficulty", "easy", "--methods", "sorb",
                  "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--json", "--fallback",
-                 "--out", str(tmp_path)])
+                 "--repair-routes", "--out", str(tmp_path)])
     assert code == 0
-    assert seen == {"sorb": None, "constrained_policy": None, "ours": "unconstrained"}
-    assert "--fallback: the constrained searches" in (tmp_path / "table.md").read_text()
+    assert seen == {"sorb": (None, True), "constrained_policy": (None, False), "ours": ("unconstrained", True)}
+    table = (tmp_path / "table.md").read_text()
+    assert "--fallback: the constrained searches" in table and "--repair-routes: an agent" in table
     capsys.readouterr()
-    assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", "--fallback",
-                 "--out", str(tmp_path / "p")]) == 2
-    assert "--fallback does not apply" in capsys.readouterr().err
+    for flag in ("--fallback", "--repair-routes"):
+        assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", flag,
+                     "--out", str(tmp_path / "p")]) == 2
+        assert f"{flag} does not apply" in capsys.readouterr().err
 
 
 def test_the_graph_learns_repairs_on_other_problems_and_keeps_them_frozen(setup, monkeypatch):

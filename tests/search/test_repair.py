@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents.search import BufferPlanner, SearchPolicy
-from agents.search.repair import EdgeMemory
+from agents.search.repair import EdgeMemory, edges_near
 
 
 class WallWorld:
@@ -501,18 +501,25 @@ class TwoDoorWorld(WallWorld):
         return ((y >= 4.0) & (y <= 6.0)) | ((y >= 9.0) & (y <= 10.0))
 
 
+def two_door_world():
+    """The two-door world, its planner (nodes either side and three in the doors: the wide door's lower
+    and upper node and the far door's), and the ids of the three door nodes."""
+    world = TwoDoorWorld()
+    side = [(x, y) for x in (1.5, 3.5) for y in (1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0)]
+    doors = [(5.0, 4.3), (5.0, 5.7), (5.0, 9.5)]
+    nodes = np.array(side + doors + [(10.0 - x, y) for x, y in side], np.float32)
+    D, C = world.pairwise(nodes, nodes)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    return world, planner, (len(side), len(side) + 1, len(side) + 2)
+
+
 @pytest.mark.parametrize("ban_detour", [math.inf, 0.0])
 def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourhood_holds_the_short_way(ban_detour):
     """Stuck on the way to one of two nodes in a wide door: banning the failed node's neighbourhood bans the
     door's other node too and sends the agent round by the far door; with ``ban_detour`` the replan keeps
     clear of the failed node alone where that is more than ``ban_detour`` predicted steps shorter."""
-    world = TwoDoorWorld()
-    side = [(x, y) for x in (1.5, 3.5) for y in (1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0)]
-    doors = [(5.0, 4.3), (5.0, 5.7), (5.0, 9.5)]
-    nodes = np.array(side + doors + [(10.0 - x, y) for x, y in side], np.float32)
-    low, high, far = len(side), len(side) + 1, len(side) + 2
-    D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    world, planner, (low, high, far) = two_door_world()
+    nodes = planner.observations
     policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
                           ban_detour=ban_detour)
     start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
@@ -532,3 +539,61 @@ def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourho
     assert SearchPolicy(planner, world).ban_detour == math.inf  # never, by default
     with pytest.raises(ValueError, match="ban_detour"):
         SearchPolicy(planner, world, ban_detour=-1.0)
+
+
+def circling(centre, t):
+    """A point 0.3 from ``centre`` that goes round it every 5 steps (an agent that moves: not stuck)."""
+    a = 2 * math.pi * t / 5
+    return (np.asarray(centre) + 0.3 * np.array([math.cos(a), math.sin(a)])).astype(np.float32)
+
+
+@pytest.mark.parametrize("repair", [True, False])
+def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_first(repair):
+    """Two agents from the same start through the wide door: the first is stuck on the leg into the door's
+    lower node and replans; the second, about to set off into the door later along one of the edges
+    recorded with that failure, plans around them first (``repair_routes``), instead of failing on them
+    in turn."""
+    world, planner, (low, _, _) = two_door_world()
+    nodes = planner.observations
+    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
+                          repair_routes=repair)
+    start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
+    t = 0
+
+    def step(first, second):
+        nonlocal t
+        t += 1
+        policy.predict({"agent_0": {"observation": first, "desired_goal": goal},
+                        "agent_1": {"observation": second, "desired_goal": goal}})
+
+    step(start, start)
+    route = list(policy.routes["agent_0"])
+    assert low in route
+    # the first agent drives to the leg into the door and stands at its start until it replans; the
+    # second one circles by its start meanwhile
+    while policy.leg("agent_0").target != low:
+        step(nodes[policy.leg("agent_0").target], circling(start, t))
+    source = policy.leg("agent_0").source
+    failed = {(int(u), int(v)) for u, v in edges_near(planner.D, source, low, 2.0)}
+    assert edges_of(policy.routes["agent_1"]) & failed  # the second agent's route takes one of them
+    while policy.stats.replans == 0:
+        step(nodes[source], circling(start, t))
+    leg = policy.leg("agent_1")
+    assert (leg.source, leg.target) not in failed  # the second agent has not come to those edges yet
+    # now the second agent drives its route, standing one step at the start of each leg
+    taken, here, at = [], start, None  # the legs it set off along, from the node it stood at
+    for _ in range(40):
+        step(circling(nodes[source], t), here)
+        leg = policy.leg("agent_1")
+        at = leg.source if leg.source is not None else at
+        taken.append((at, leg.target))
+        if leg.target is None:
+            break
+        here, at = nodes[leg.target], leg.target
+        step(circling(nodes[source], t), here)
+    assert taken[-1][1] is None  # on its way to the goal
+    if repair:
+        assert policy.route_repairs == 1 and not failed & set(taken)
+    else:
+        assert policy.route_repairs == 0 and failed & set(taken)
+    assert policy.stats.replans == 1  # only the first agent got stuck
