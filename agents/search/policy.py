@@ -123,7 +123,7 @@ class SearchPolicy(StuckReplanning):
         repair_routes: an agent about to set off along an edge that another agent failed on in this
             episode (or that the memory removed meanwhile) plans anew from where it stands first (see
             :mod:`agents.search.replanning`); off by default: on the validation problems it saves
-            little cost and loses a few runs (see the planning docs).
+            little cost and loses runs (see the planning docs).
         detach_radius: where an agent set off for a node (or its goal) as one edge away and the
             critic now puts it far, the nodes within this many predicted steps of that node (of the
             node it set off from) are no longer linked to its start (its goal) in its replans of the
@@ -341,7 +341,7 @@ class SearchPolicy(StuckReplanning):
         self.replan_time = 0.0
         #: replans of the episode that kept clear of the failed waypoints alone (``ban_detour``)
         self.narrow_replans = 0
-        #: replans of the episode before a leg along an edge the memory removed meanwhile (``repair_routes``)
+        #: replans of the episode before a leg along an edge another agent failed on (``repair_routes``)
         self.route_repairs = 0
         self._leg_checked: Dict[str, Tuple[AgentPlan, int]] = {}
 

@@ -30,9 +30,11 @@
 With ``repair_routes``, what one agent learns the others use at once: an agent about to set off
 along an edge that another agent failed on in the episode (one of the edges recorded with it), or
 that the memory removed meanwhile, plans anew from where it stands. It tries in turn the replans
-above but the last (over every edge), leaving out the edges every agent failed on, and keeps its
-route where none is solved. Its start (where it stands: the leg's source) links to none of the
-nodes those edges lead to from there.
+above but the last (over every edge), leaving out the edges every agent failed on; its start
+(where it stands: the leg's source) links to none of the nodes those edges lead to from there. It
+keeps its route where none is solved, or where the new one is predicted more than
+``REPAIR_STRETCH`` (2) times as long as the rest of its route (a long way round leads through
+other agents' places, and the failed edge may have been failed for another reason).
 """
 from __future__ import annotations
 
@@ -45,6 +47,10 @@ import numpy as np
 from .controller import AgentPlan
 from .dependencies import nodes_near
 from .repair import edges_near, near_either_way, past_failed_waypoints
+
+#: a route repair (``repair_routes``) is taken only where its predicted length is at most this many
+#: times that of the rest of the route it replaces
+REPAIR_STRETCH = 2.0
 
 
 class StuckReplanning:
@@ -156,7 +162,6 @@ class StuckReplanning:
         self.replan_time += time.perf_counter() - t1
         return new
 
-
     def _attempts(self, agent: str, shared: bool = False) -> Tuple[List[Tuple[Any, ...]], int]:
         """The replans to try for ``agent`` in turn (see the module's docstring; ``shared``: leaving out
         the edges every agent failed on this episode, not only its own), each
@@ -226,11 +231,17 @@ class StuckReplanning:
         self._seen_index[agent] = 0
         return AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
 
+    def _rest_of_route(self, agent: str, k: int) -> float:
+        """The predicted length of ``agent``'s route from the start of its leg ``k`` to its goal."""
+        problem, goal, _ = self._route_graph[agent]
+        nodes = [*self.routes[agent][max(k - 1, 0):], goal]
+        return float(sum(problem.D[u, v] for u, v in zip(nodes[:-1], nodes[1:])))
+
     def _repair_routes(self, current: Dict[str, np.ndarray]) -> None:
         """Plan anew for each agent in ``current`` that is about to set off along an edge another agent
         failed on in this episode (or right beside it: :func:`~agents.search.repair.edges_near`), or
         that the memory removed since its route was made; around those edges. Where no such route
-        exists, it keeps its own."""
+        exists, or it is more than ``REPAIR_STRETCH`` times as long, it keeps its own."""
         failed = {b: {(int(u), int(v)) for u, v in self._failed_edges.get(b, [])} for b in self.agents}
         removed = {(int(u), int(v)) for u, v in self.memory.removed()}
         if not removed and not any(failed.values()):
@@ -258,10 +269,12 @@ class StuckReplanning:
             attempts = [(*a[:4], (sorted(beyond.union(a[4][0])), a[4][1]))
                         for a in self._attempts(agent, shared=True)[0][:-1]]
             sub, _ = self._first_solved(agent, ob, attempts)
-            if sub is not None and sub.solved:
+            if sub is not None and sub.solved and sub.soc is not None \
+                    and sub.soc <= REPAIR_STRETCH * self._rest_of_route(agent, k):
                 self.controller.set_plan(agent, self._install(agent, sub))
                 self._leg_checked[agent] = (self.controller.plans[agent], 0)
                 self.route_repairs += 1
             self.replan_time += time.perf_counter() - t1
+
 
 __all__ = ["StuckReplanning"]

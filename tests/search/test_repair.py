@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.search import BufferPlanner, SearchPolicy
+from agents.search import BufferPlanner, SearchPolicy, replanning
 from agents.search.repair import EdgeMemory, edges_near
 
 
@@ -547,12 +547,14 @@ def circling(centre, t):
     return (np.asarray(centre) + 0.3 * np.array([math.cos(a), math.sin(a)])).astype(np.float32)
 
 
-@pytest.mark.parametrize("repair", [True, False])
-def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_first(repair):
+@pytest.mark.parametrize("repair, stretch", [(True, 2.0), (False, 2.0), (True, 1.0)])
+def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_first(repair, stretch, monkeypatch):
     """Two agents from the same start through the wide door: the first is stuck on the leg into the door's
     lower node and replans; the second, about to set off into the door later along one of the edges
     recorded with that failure, plans around them first (``repair_routes``), instead of failing on them
-    in turn."""
+    in turn; but not where that route is more than ``REPAIR_STRETCH`` times as long as the rest of its own
+    (the way round is a little longer here)."""
+    monkeypatch.setattr(replanning, "REPAIR_STRETCH", stretch)
     world, planner, (low, _, _) = two_door_world()
     nodes = planner.observations
     policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
@@ -592,7 +594,7 @@ def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_
         here, at = nodes[leg.target], leg.target
         step(circling(nodes[source], t), here)
     assert taken[-1][1] is None  # on its way to the goal
-    if repair:
+    if repair and stretch > 1.0:
         assert policy.route_repairs == 1 and not failed & set(taken)
     else:
         assert policy.route_repairs == 0 and failed & set(taken)
