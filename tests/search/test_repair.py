@@ -599,3 +599,4 @@ def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_
     else:
         assert policy.route_repairs == 0 and failed & set(taken)
     assert policy.stats.replans == 1  # only the first agent got stuck
+    assert not SearchPolicy(planner, world).repair_routes  # off by default
