@@ -158,7 +158,7 @@ class StuckReplanning:
             self.routes[agent] = route[k + 1:]
             if agent in self._route_graph:  # the rest of the route, from here
                 self._route_graph[agent] = (*self._route_graph[agent][:2], self.controller.t)
-        self._seen_index[agent] = 0
+            self._seen_index[agent] = 0
         self.replan_time += time.perf_counter() - t1
         return new
 
@@ -178,7 +178,7 @@ class StuckReplanning:
             ([], parked, edges, False)]
         none: Tuple[List[int], List[int]] = ([], [])
         detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
-        learned = self._exclude_edges(agent, True) if shared else self.memory.removed()
+        learned = edges if shared else self.memory.removed()
         attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
             ([], [], learned, False, detached), ([], [], learned, False, none), ([], [], None, False, none)]
         return attempts, len(plans)
@@ -242,25 +242,29 @@ class StuckReplanning:
         failed on in this episode (or right beside it: :func:`~agents.search.repair.edges_near`), or
         that the memory removed since its route was made; around those edges. Where no such route
         exists, or it is more than ``REPAIR_STRETCH`` times as long, it keeps its own."""
-        failed = {b: {(int(u), int(v)) for u, v in self._failed_edges.get(b, [])} for b in self.agents}
-        removed = {(int(u), int(v)) for u, v in self.memory.removed()}
-        if not removed and not any(failed.values()):
-            return
+        if not any(self._failed_edges.values()) and not len(self.memory.removed()):
+            return  # nothing failed yet: legs are checked from the first failure on
         holding = self.controller.stats.holding
-        for agent, ob in current.items():
+        fresh = []  # the agents on a leg not checked yet
+        for agent in current:
             if agent not in self._route_graph or holding.get(agent):
                 continue  # a held agent waits for others in the plan's order: checked when it sets off
             plan, k = self.controller.plans[agent], self.controller.index[agent]
             seen = self._leg_checked.get(agent)
-            if seen is not None and seen[0] is plan and seen[1] == k:
-                continue
-            self._leg_checked[agent] = (plan, k)
+            if seen is None or seen[0] is not plan or seen[1] != k:
+                self._leg_checked[agent] = (plan, k)
+                fresh.append(agent)
+        if not fresh:
+            return
+        failed = {b: {(int(u), int(v)) for u, v in self._failed_edges.get(b, [])} for b in self.agents}
+        removed = {(int(u), int(v)) for u, v in self.memory.removed()}
+        for agent in fresh:
             leg = self.leg(agent)
             if leg is None or leg.source is None or leg.target is None:
                 continue
             edge = (leg.source, leg.target)
             others = removed.union(*[f for b, f in failed.items() if b != agent])
-            if edge in failed.get(agent, set()) or edge not in others:
+            if edge in failed[agent] or edge not in others:
                 continue  # its own failed edges are left out of its replans already
             t1 = time.perf_counter()
             # all but the attempt over every edge; standing at the leg's source, its start links to none
@@ -268,9 +272,9 @@ class StuckReplanning:
             beyond = {v for u, v in others if u == leg.source}
             attempts = [(*a[:4], (sorted(beyond.union(a[4][0])), a[4][1]))
                         for a in self._attempts(agent, shared=True)[0][:-1]]
-            sub, _ = self._first_solved(agent, ob, attempts)
+            sub, _ = self._first_solved(agent, current[agent], attempts)
             if sub is not None and sub.solved and sub.soc is not None \
-                    and sub.soc <= REPAIR_STRETCH * self._rest_of_route(agent, k):
+                    and sub.soc <= REPAIR_STRETCH * self._rest_of_route(agent, self.controller.index[agent]):
                 self.controller.set_plan(agent, self._install(agent, sub))
                 self._leg_checked[agent] = (self.controller.plans[agent], 0)
                 self.route_repairs += 1
