@@ -35,6 +35,7 @@ from agents.search.repair import EdgeMemory
 from agents.search.sparsify import two_way_consistent
 
 from .anatomy import failures_field
+from .cost_anatomy import cost_split_field
 from .methods import METHODS, Method, execute
 
 DIFFICULTIES = {"easy": 8.0, "medium": 4.0, "hard": 2.0}
@@ -185,7 +186,8 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
-              "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max", "failures")
+              "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max", "failures",
+              "cost_split")
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
@@ -223,6 +225,7 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
         "planning_time": ex.planning_time, "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
         **mapf_metrics(ex.arrival, ex.steps),
         "c_max": method.c_max if method.search else math.inf, "failures": failures_field(ex.failures),
+        "cost_split": cost_split_field(ex.cost_split, ex.cost),
     }
     return row, ex
 

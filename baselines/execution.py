@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional
 
 import numpy as np
+
+from agents.search.controller import ACTIVITIES
 
 from .anatomy import AgentFailure
 
@@ -31,16 +33,23 @@ class Execution:
     failures: List[AgentFailure] = field(default_factory=list)
     #: per agent, the step at which it arrived (``-1``: it did not)
     arrival: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: per agent and activity (:data:`~agents.search.controller.ACTIVITIES`), the cost it took
+    #: doing that (rows sum to ``cost``; empty where the runner does not record it)
+    cost_split: np.ndarray = field(default_factory=lambda: np.zeros((0, len(ACTIVITIES))))
 
 
 def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
-               steps: int) -> set:
+               steps: int, activity: Optional[Dict[str, str]] = None, split: Optional[np.ndarray] = None) -> set:
     """Add one step's obstacle costs and arrivals (at step ``steps``) to the per-agent arrays; returns
-    the contacts under way, as pairs of agent names."""
+    the contacts under way, as pairs of agent names. With ``split`` (agents x :data:`ACTIVITIES`),
+    each agent's cost also goes to the column of what it did (``activity``; default ``drive``)."""
     now: set = set()
     for a, info in infos.items():
         i = index[a]
-        cost[i] += float(info.get("obstacle_cost", info["cost"]))
+        c = float(info.get("obstacle_cost", info["cost"]))
+        cost[i] += c
+        if split is not None:
+            split[i, ACTIVITIES.index((activity or {}).get(a, "drive"))] += c
         now.update(frozenset((a, b)) for b in info.get("collided_with", ()))
         if term.get(a, False):
             reached[i] = True

@@ -26,6 +26,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
+from agents.search.controller import ACTIVITIES
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
@@ -167,13 +168,15 @@ def execute(
     step_length = float(getattr(env, "action_scale", 1.0))
     tracker = FailureTracker(names, step_length, touch=2.0 * env.scenario.agent_radius + 0.5 * step_length)
     parked_at = np.full(k, -1)
+    split = np.zeros((k, len(ACTIVITIES)))
     while env.agents:
         actions, _ = policy.predict({a: obs[a] for a in env.agents})
+        activity = dict(policy.stats.activity)
         obs, _, term, trunc, infos = env.step(actions)
         steps += 1
         traj.append(env.positions)
         tracker.step(policy.stats.holding, infos, env.agents)
-        now = tally_step(infos, term, index, cost, reached, parked_at, steps)
+        now = tally_step(infos, term, index, cost, reached, parked_at, steps, activity, split)
         collisions += len(now - touching)  # a contact counts once, when it begins
         touching = now
     plan = policy.current_plan
@@ -194,7 +197,7 @@ def execute(
             planned=plan is None or plan.solved, legs={a: policy.leg(a) for a in names},
             escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
-                     plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at)
+                     plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at, split)
 
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "MARL_METHODS", "METHODS", "Method", "PAPER_METHODS",

@@ -95,6 +95,15 @@ class AgentPlan:
     after: Optional[Dict[int, List[Tuple[str, int]]]] = None
 
 
+#: What an agent does on a step (``ControllerStats.activity``): ``drive`` (its policy drives it to its
+#: target), ``fallback`` (the fallback policy drives the leg), ``escape`` (a random or sidestep
+#: action of an agent found stuck), ``wait`` (it stands at a waypoint until its plan's departure
+#: time), ``order`` (it stands until an agent the plan sends first has passed), ``park`` (it holds
+#: its parking until the agents whose routes pass its goal have passed), ``clear`` (it keeps clear
+#: of another agent's goal) and ``yield`` (another agent with priority is too close).
+ACTIVITIES = ("drive", "fallback", "escape", "wait", "order", "park", "clear", "yield")
+
+
 @dataclass
 class ControllerStats:
     steps: int = 0
@@ -124,6 +133,8 @@ class ControllerStats:
     #: ``"yield:<agent>"`` (another agent with priority was too close), ``"wait:<agent>"`` (the plan
     #: sends that one first), ``"clear:<agent>"`` (that one stands by its goal) or ``None`` (it moved)
     holding: Dict[str, Optional[str]] = field(default_factory=dict)
+    #: per agent, what it did on the last step, one of :data:`ACTIVITIES`
+    activity: Dict[str, str] = field(default_factory=dict)
     #: per agent, times it was found stuck on the way to its current target
     leg_escapes: Dict[str, int] = field(default_factory=dict)
 
@@ -411,9 +422,11 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
                     reason[i] = f"yield:{live[w]}"
                 hold[i] = True
         self.stats.holding = {a: reason[i] for i, a in enumerate(live)}
+        escaping: set = set()
         if self.stuck_window is not None:
-            self._unstick(live, obs, hold, actions, to_target)
+            escaping = self._unstick(live, obs, hold, actions, to_target)
         actions[hold] = 0.0
+        self.stats.activity = {a: self._activity(a, reason[i], a in escaping) for i, a in enumerate(live)}
         if self.replan is not None and self.replan_lag is not None:
             for i, a in enumerate(live):
                 if self._lag(a) > self.replan_lag:
@@ -474,10 +487,23 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             return True
         return False
 
+    def _activity(self, agent: str, reason: Optional[str], escaping: bool) -> str:
+        """One of :data:`ACTIVITIES`: what ``agent`` does on this step (held for ``reason``)."""
+        if reason is None:
+            if escaping:
+                return "escape"
+            return "fallback" if self._fallback_at.get(agent) == self._reached[agent] else "drive"
+        kind, _, other = reason.partition(":")
+        if kind == "wait" and other:
+            return "park" if self._parks_after.get(agent) == other else "order"
+        return kind
+
     def _unstick(self, live: List[str], obs: np.ndarray, hold: np.ndarray, actions: np.ndarray,
-                 to_target: Dict[str, float]) -> None:
-        """Replace the actions of stuck agents free to move by random ones (edits ``actions``)."""
+                 to_target: Dict[str, float]) -> set:
+        """Replace the actions of stuck agents free to move by random ones (edits ``actions``); returns
+        the agents whose action it replaced."""
         scale = 255.0 if obs.dtype == np.uint8 else 1.0
+        replaced = set()
         for i, a in enumerate(live):
             recent = self._recent[a]
             stalled = self._no_progress(a, to_target.get(a), bool(hold[i]))
@@ -487,6 +513,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if self._escape[a] > 0:
                 self._escape[a] -= 1
                 actions[i] = self._escape_step(a, actions[i])
+                replaced.add(a)
                 recent.clear()
                 continue
             recent.append(obs[i].astype(np.float32) / scale)
@@ -520,6 +547,8 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if self._sidesteps(a):
                 self._side[a] = -self._side[a]
             actions[i] = self._escape_step(a, actions[i])
+            replaced.add(a)
+        return replaced
 
     def _hand_over_far_legs(self, live: List[str], to_target: Dict[str, float]) -> None:
         """Hand a leg to ``fallback_policy`` from its start where the driver's critic puts its target
@@ -593,4 +622,4 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         return hold
 
 
-__all__ = ["AgentPlan", "ControllerStats", "WaypointController"]
+__all__ = ["ACTIVITIES", "AgentPlan", "ControllerStats", "WaypointController"]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
+from agents.search.controller import ACTIVITIES
 from baselines.evaluation import (
     EvaluationSetup,
     aggregate,
@@ -423,3 +424,28 @@ def test_many_agents_curve_reads_evaluate_rows(tmp_path, monkeypatch, capsys):
         w.writerow({"method": "ours", "agents": 2})
     with pytest.raises(SystemExit, match="no isr"):
         runpy.run_path("examples/many_agents_curve.py", run_name="__main__")
+
+
+def test_execute_splits_each_agents_cost_by_what_it_did(setup):
+    """Execution.cost_split: per agent and activity, summing to the agent's cost; the row keeps the
+    costliest agent's split; a method without search never holds; holds are paid where they happen."""
+    from baselines.cost_anatomy import parse_cost_split
+    from baselines.evaluation import run_row
+
+    prob = make_problems(setup, "hard", 6, 1, seed=2)[0]
+    env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=6, max_cycles=150)
+    col = {a: i for i, a in enumerate(ACTIVITIES)}
+    for method in (METHODS["unconstrained_policy"], METHODS["ours"], METHODS["ours"].with_options(hold="order")):
+        row, ex = run_row(setup, env, method, prob, seed=0)
+        assert ex.cost_split.shape == (6, len(ACTIVITIES)) and (ex.cost_split >= 0).all()
+        np.testing.assert_allclose(ex.cost_split.sum(1), ex.cost, atol=1e-9)
+        split = parse_cost_split(row["cost_split"])
+        assert sum(split.values()) == pytest.approx(row["cost_max"], abs=0.01 * len(ACTIVITIES))
+        paid = {a for a in ACTIVITIES if ex.cost_split[:, col[a]].sum() > 0}
+        if not method.search:  # no plan: nothing to wait for (it still yields, and escapes when stuck)
+            assert paid <= {"drive", "escape", "yield"}
+        elif method.hold == "order":  # standing for the plan's order and for parking
+            assert {"order", "park"} <= paid and "wait" not in paid
+        else:  # vector agents keep to the plan's times
+            assert "wait" in paid and not {"order", "park"} & paid
+    env.close()

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from agents.search.controller import AgentPlan, WaypointController
+from agents.search.controller import ACTIVITIES, AgentPlan, WaypointController
 
 SIZE = 55.0
 
@@ -349,6 +349,34 @@ def test_a_stuck_leg_is_handed_to_the_fallback_policy():
                               reach_threshold=1.0, safety_radius=None, seed=1)
     trail = run(env, ctrl, limit=80)["agent_0"]
     assert np.linalg.norm(trail[-1] - [20, 5]) > 5.0 and ctrl.stats.fallbacks == 0
+
+
+def test_the_controller_records_what_each_agent_does_on_each_step():
+    """ControllerStats.activity: the refusing agent drives (standing), is found stuck and escapes,
+    then the fallback drives its leg; holds are named after their reason."""
+    goal = np.array([20, 5], np.float32) / SIZE
+    env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
+    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+                              reach_threshold=1.0, safety_radius=None, fallback_policy=straight_policy, seed=1)
+    obs, _ = env.reset(options=env._pinned)
+    seen = []
+    while env.agents and ctrl.t < 80:
+        actions = ctrl.act({a: obs[a]["observation"] for a in env.agents})
+        seen.append(ctrl.stats.activity["agent_0"])
+        obs, *_ = env.step(actions)
+    assert set(seen) <= set(ACTIVITIES)
+    first = {a: seen.index(a) for a in ("drive", "escape", "fallback")}
+    assert first["drive"] == 0 < first["escape"] < first["fallback"]
+    assert seen.count("escape") >= ctrl.stats.escapes and 0 < seen.count("fallback") <= ctrl.stats.fallback_steps
+    assert not {"wait", "order", "park", "clear", "yield"} & set(seen)
+    # the kinds of hold
+    assert ctrl._activity("agent_0", "wait", False) == "wait"
+    assert ctrl._activity("agent_0", "yield:agent_1", False) == "yield"
+    assert ctrl._activity("agent_0", "clear:agent_1", False) == "clear"
+    assert ctrl._activity("agent_0", "wait:agent_1", False) == "order"
+    ctrl._parks_after["agent_0"] = "agent_1"
+    assert ctrl._activity("agent_0", "wait:agent_1", False) == "park"
+    assert ctrl._activity("agent_0", "wait:agent_2", False) == "order"
 
 
 def test_the_fallback_drives_only_the_stuck_leg():

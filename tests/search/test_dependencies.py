@@ -245,6 +245,7 @@ def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_
     obs = {"a": wp[0], "b": wp[0] + [0.0, 1.0]}
     c.act(obs)
     assert c.index["b"] == 0 and c.stats.holding["b"] == "wait:a"  # a has not reached its waypoint 2
+    assert c.stats.activity == {"a": "drive", "b": "order"}
     c.act({"a": wp[1], "b": obs["b"]})
     assert c.index["a"] == 2 and c.index["b"] == 0
     c.act({"a": wp[2], "b": obs["b"]})  # a reached waypoint 2: b may go
@@ -291,7 +292,7 @@ def test_an_agent_does_not_yield_to_one_that_waits_for_it():
                                                   "b": AgentPlan(np.zeros((0, 2)), np.array([9.0, 1.0]))},
                            reach_threshold=0.5, safety_radius=3.0, stuck_window=None)
     c.act({"a": np.array([0.0, 0.0]), "b": np.array([0.0, 1.0])})
-    assert c.stats.holding == {"a": None, "b": "yield:a"}
+    assert c.stats.holding == {"a": None, "b": "yield:a"} and c.stats.activity == {"a": "drive", "b": "yield"}
 
 
 def test_an_agent_that_hovers_away_from_its_target_counts_as_stuck_and_replans():
@@ -393,6 +394,7 @@ def test_an_agent_parks_only_after_the_agents_whose_routes_pass_its_goal():
     a0, b = np.array([0.0, 0.0]), [np.array([3.0, 5.0]), np.array([3.0, 1.0]), np.array([3.0, -5.0])]
     c.act({"a": a0, "b": b[0]})
     assert c.index["a"] == 0 and c.stats.holding["a"] == "wait:b" and "a" in asked
+    assert c.stats.activity["a"] == "park"
     c.act({"a": a0, "b": b[1]})  # b is on a's goal now: a still waits
     assert c.index["a"] == 0 and c.index["b"] == 2
     c.act({"a": a0, "b": b[2]})  # b has passed

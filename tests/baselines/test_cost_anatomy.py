@@ -1,0 +1,87 @@
+"""Where the largest cost goes (baselines.cost_anatomy, examples/cost_anatomy.py)."""
+import csv
+import runpy
+import sys
+
+import numpy as np
+import pytest
+
+from agents.search.controller import ACTIVITIES
+from baselines.cost_anatomy import (
+    cost_anatomy,
+    cost_anatomy_figure,
+    cost_anatomy_table,
+    cost_split_field,
+    parse_cost_split,
+)
+
+
+def test_the_row_keeps_the_costliest_agents_split_and_reads_it_back():
+    split = np.zeros((3, len(ACTIVITIES)))
+    split[0, ACTIVITIES.index("drive")] = 4.0
+    split[1, ACTIVITIES.index("drive")] = 3.0
+    split[1, ACTIVITIES.index("park")] = 2.5
+    split[2, ACTIVITIES.index("yield")] = 1.0
+    field = cost_split_field(split, split.sum(1))
+    assert field == "drive=3.00;park=2.50"
+    assert parse_cost_split(field) == {"drive": 3.0, "park": 2.5}
+    assert cost_split_field(np.zeros((0, len(ACTIVITIES))), np.zeros(0)) == "" and parse_cost_split("") == {}
+    with pytest.raises(ValueError, match="unknown activity 'nap'"):
+        parse_cost_split("drive=1.0;nap=2.0")
+
+
+def rows():
+    return [
+        {"method": "ours", "agents": 5, "difficulty": "hard", "success": True, "cost_split": "drive=6.00;order=2.00"},
+        {"method": "ours", "agents": 5, "difficulty": "hard", "success": True, "cost_split": "drive=2.00;park=4.00"},
+        {"method": "ours", "agents": 5, "difficulty": "hard", "success": False, "cost_split": "escape=90.00"},
+        {"method": "ours", "agents": 5, "difficulty": "easy", "success": True, "cost_split": "drive=1.00"},
+        {"method": "sorb", "agents": 5, "difficulty": "hard", "success": True, "cost_split": ""},
+    ]
+
+
+def test_the_anatomy_averages_the_successful_runs_per_cell(tmp_path):
+    summary = cost_anatomy(rows())
+    assert [(c["method"], c["difficulty"], c["runs"]) for c in summary] == [("ours", "easy", 1), ("ours", "hard", 2)]
+    hard = summary[1]
+    assert hard["cost"] == pytest.approx(7.0) and hard["drive"] == pytest.approx(4.0)
+    assert hard["order"] == pytest.approx(1.0) and hard["park"] == pytest.approx(2.0) and hard["escape"] == 0
+    table = cost_anatomy_table(summary)
+    assert "| ours | Hard | 5 | 2 | 7.00 | 4.00 (57%) | 0 | 0 | 0 | 1.00 (14%) | 2.00 (29%) | 0 | 0 |" in table
+    path = cost_anatomy_figure(summary, tmp_path / "cost.png")
+    assert path.stat().st_size > 1000
+    with pytest.raises(ValueError, match="no cell"):
+        cost_anatomy_figure([], tmp_path / "none.png")
+
+
+def run_example(argv, capsys):
+    old, sys.argv = sys.argv, ["cost_anatomy.py", *argv]
+    try:
+        with pytest.raises(SystemExit) as done:
+            runpy.run_path("examples/cost_anatomy.py", run_name="__main__")
+    finally:
+        sys.argv = old
+    return done.value.code, capsys.readouterr()
+
+
+def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, capsys):
+    fields = ["method", "agents", "difficulty", "problem", "success", "cost_max", "cost_split"]
+    folder = tmp_path / "run"
+    folder.mkdir()
+    with open(folder / "runs.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        for i, r in enumerate(rows()):
+            w.writerow({**r, "problem": i, "cost_max": 1.0})
+    code, out = run_example([str(folder), "--methods", "ours", "--agents", "5", "--figure", str(tmp_path / "c.png")],
+                            capsys)
+    assert code == 0 and "| ours | Hard | 5 | 2 | 7.00 |" in out.out and (tmp_path / "c.png").exists()
+    code, out = run_example([str(folder), "--methods", "sorb"], capsys)
+    assert "no successful run with a cost split" in str(code)
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "runs.csv").write_text("method,agents,difficulty,problem,success\nours,5,hard,0,True\n")
+    code, out = run_example([str(old)], capsys)
+    assert "no cost_split column" in str(code)
+    code, out = run_example([str(tmp_path / "nothing")], capsys)
+    assert "does not exist" in str(code)
