@@ -95,6 +95,7 @@ def cost_anatomy_figure(summary: Sequence[Dict[str, Any]], path: Any, title: str
         if v.any():
             ax.bar(x, v, bottom=bottom, label=a, color=colours(j))
         bottom += v
+    ax.set_ylim(0, 1.3 * float(bottom.max()) if bottom.max() > 0 else 1.0)  # room for the legend
     ax.set_xticks(x, labels, fontsize=7)
     ax.set_ylabel("mean largest cumulative cost")
     ax.set_title(title or "Where the costliest agent's cost goes")
