@@ -2,6 +2,7 @@
 import csv
 import runpy
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -85,3 +86,26 @@ def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, c
     assert "no cost_split column" in str(code)
     code, out = run_example([str(tmp_path / "nothing")], capsys)
     assert "does not exist" in str(code)
+
+
+def test_the_plan_dependencies_example_counts_what_routes_share(capsys):
+    old = sys.argv
+    try:
+        sys.argv = ["plan_dependencies.py", "--env", "SafeCentralObstacle-v0", "--agents", "4", "--problems", "2",
+                    "--nodes", "150", "--seed", "1"]
+        with pytest.raises(SystemExit) as done:
+            runpy.run_path("examples/plan_dependencies.py", run_name="__main__")
+        assert done.value.code == 0
+        out = capsys.readouterr().out
+        rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:5]]
+                for line in out.splitlines() if line.startswith("| sorb") or line.startswith("| ours")}
+        assert set(rows) == {"sorb", "ours"} and all(v[0] >= 0 and v[1] >= 0 and v[2] > 0 for v in rows.values())
+        for argv, message in ((["--agents", "1"], "at least 2"), (["--methods", "constrained_policy"], "only search"),
+                              (["--c-max-from", str(Path("examples/table2/apt3/c_max.json")), "--agents", "3"],
+                               "no c_max for 3 agents")):
+            sys.argv = ["plan_dependencies.py", *argv]
+            with pytest.raises(SystemExit) as done:
+                runpy.run_path("examples/plan_dependencies.py", run_name="__main__")
+            assert done.value.code == 2 and message in capsys.readouterr().err
+    finally:
+        sys.argv = old
