@@ -26,10 +26,10 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from agents.search.controller import ACTIVITIES
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
+from agents.search.stats import ACTIVITIES
 
 from .anatomy import AgentFailure, FailureTracker
 from .execution import Execution, geodesic_of, tally_step

@@ -34,7 +34,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .controller import AgentPlan, ControllerStats, WaypointController
+from .controller import AgentPlan, WaypointController
 from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
 from .graph import NodePairwise, ProblemGraph
 from .models import (
@@ -51,6 +51,7 @@ from .models import (
 from .planner import BufferPlanner, MultiAgentPlan, direct_plans
 from .repair import EdgeMemory
 from .replanning import StuckReplanning
+from .stats import ControllerStats
 
 
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.search.controller import ACTIVITIES
+from agents.search.stats import ACTIVITIES
 from baselines.cost_anatomy import (
     cost_anatomy,
     cost_anatomy_figure,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from agents.search.controller import ACTIVITIES
+from agents.search.stats import ACTIVITIES
 from baselines.evaluation import (
     EvaluationSetup,
     aggregate,

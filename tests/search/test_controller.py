@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from agents.search.controller import ACTIVITIES, AgentPlan, WaypointController
+from agents.search.controller import AgentPlan, WaypointController
+from agents.search.stats import ACTIVITIES
 
 SIZE = 55.0
 
