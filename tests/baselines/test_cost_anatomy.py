@@ -77,6 +77,8 @@ def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, c
     code, out = run_example([str(folder), "--methods", "ours", "--agents", "5", "--figure", str(tmp_path / "c.png")],
                             capsys)
     assert code == 0 and "| ours | Hard | 5 | 2 | 7.00 |" in out.out and (tmp_path / "c.png").exists()
+    code, out = run_example([str(folder), "--methods", "ours", "--summary"], capsys)  # easy 1.00, hard 7.00
+    assert code == 0 and "| ours | All | 5 | 3 | 4.00 | 2.50 (62%) | 0 | 0 | 0 | 0.50 (12%) | 1.00 (25%) |" in out.out
     code, out = run_example([str(folder), "--methods", "sorb"], capsys)
     assert "no successful run with a cost split" in str(code)
     old = tmp_path / "old"
