@@ -1,10 +1,14 @@
-"""Shared test helpers: a stand-in goal-conditioned agent for fast tests (no torch, no checkpoint).
+"""Shared test helpers: a stand-in goal-conditioned agent for fast tests (no torch, no checkpoint),
+and a runner of the example scripts.
 
 Observations of the vector envs are positions divided by the world size; the stand-in's
 "critics" are exact: distance = straight-line length in units (at least one step), cost = the
 obstacle cost integrated along the straight segment. Its policy heads straight for the goal.
 """
 from __future__ import annotations
+
+import runpy
+import sys
 
 import numpy as np
 import pytest
@@ -51,3 +55,20 @@ def stand_in_models():
     agent = StraightLineAgent(env.field, env.world_size)
     env.close()
     return {"unconstrained": agent, "constrained": agent}
+
+
+@pytest.fixture
+def run_example(capsys):
+    """``run_example(script, *argv)``: run ``python examples/<script> *argv`` in this process; returns
+    its exit code and what it printed (``capsys.readouterr()``)."""
+
+    def run(script, *argv):
+        old, sys.argv = sys.argv, [script, *argv]
+        try:
+            with pytest.raises(SystemExit) as done:
+                runpy.run_path(f"examples/{script}", run_name="__main__")
+        finally:
+            sys.argv = old
+        return done.value.code, capsys.readouterr()
+
+    return run

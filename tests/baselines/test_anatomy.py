@@ -133,10 +133,8 @@ def test_an_execution_records_why_agents_failed(stand_in_models):
     assert rec[0]["method"] == "m" and rec[0]["reason"] == "stuck_on_leg" and rec[0]["agent"] == "agent_0"
 
 
-def test_the_anatomy_script_compares_folders(tmp_path, capsys):
+def test_the_anatomy_script_compares_folders(tmp_path, run_example):
     import csv
-    import runpy
-    import sys
 
     fields = ["method", "agents", "difficulty", "problem", "success", "failures"]
     for name, failures in (("before", ["agent_1:stuck_on_leg", "agent_0:deadlock;agent_2:stuck_on_leg"]),
@@ -148,16 +146,10 @@ def test_the_anatomy_script_compares_folders(tmp_path, capsys):
             for i, text in enumerate(failures):
                 w.writerow({"method": "ours", "agents": 5, "difficulty": "hard", "problem": i,
                             "success": not text, "failures": text})
-    argv = ["failure_anatomy.py", str(tmp_path / "before"), str(tmp_path / "after"), "--labels", "before", "after",
-            "--figure", str(tmp_path / "a.png"), "--problems", "2"]
-    old, sys.argv = sys.argv, argv
-    try:
-        with pytest.raises(SystemExit) as done:
-            runpy.run_path("examples/failure_anatomy.py", run_name="__main__")
-    finally:
-        sys.argv = old
-    assert done.value.code == 0
-    out = capsys.readouterr().out
+    code, captured = run_example("failure_anatomy.py", str(tmp_path / "before"), str(tmp_path / "after"), "--labels",
+                                 "before", "after", "--figure", str(tmp_path / "a.png"), "--problems", "2")
+    assert code == 0
+    out = captured.out
     assert "## before: 0/2 runs succeeded; 3 agents failed: deadlock 1 (33%), stuck_on_leg 2 (67%)" in out
     assert "## after: 1/2 runs succeeded; 1 agents failed: stuck_on_leg 1 (100%)" in out
     assert (tmp_path / "a.png").exists()

@@ -1,7 +1,5 @@
 """Two evaluations compared run by run (baselines.compare, examples/compare_runs.py)."""
 import csv
-import runpy
-import sys
 
 import numpy as np
 import pytest
@@ -63,31 +61,20 @@ def write(folder, table):
         w.writerows(table)
 
 
-def run_example(argv, capsys):
-    old, sys.argv = sys.argv, ["compare_runs.py", *argv]
-    try:
-        with pytest.raises(SystemExit) as done:
-            runpy.run_path("examples/compare_runs.py", run_name="__main__")
-    finally:
-        sys.argv = old
-    return done.value.code, capsys.readouterr()
-
-
-def test_the_example_compares_folder_pairs_and_refuses_mismatched_folders(tmp_path, capsys):
+def test_the_example_compares_folder_pairs_and_refuses_mismatched_folders(tmp_path, run_example):
     write(tmp_path / "b0", rows([(True, 3.0, 9), (True, 5.0, 9)]) + rows([(True, 1.0, 9)], method="sorb"))
     write(tmp_path / "a0", rows([(True, 3.0, 9), (False, 0, 300)]) + rows([(False, 0, 300)], method="sorb"))
     write(tmp_path / "b1", rows([(False, 0, 300)], agents=10))
     write(tmp_path / "a1", rows([(True, 7.0, 20)], agents=10))
-    code, out = run_example(["--before", str(tmp_path / "b0"), str(tmp_path / "b1"), "--after", str(tmp_path / "a0"),
-                             str(tmp_path / "a1"), "--methods", "ours"], capsys)
+    b0, b1, a0, a1 = (str(tmp_path / n) for n in ("b0", "b1", "a0", "a1"))
+    code, out = run_example("compare_runs.py", "--before", b0, b1, "--after", a0, a1, "--methods", "ours")
     assert code == 0
     assert "| ours, 5 agents, hard | 2 | 2 -> 1 | 1 (1) | 0 | 1 | 3.00 -> 3.00 |" in out.out
     assert "sorb" not in out.out
     assert "## all folders" in out.out and "| all | 3 | 2 -> 2 | 1 (1) | 1 (0) |" in out.out
-    code, out = run_example(["--before", str(tmp_path / "b0"), "--after", str(tmp_path / "a0"), str(tmp_path / "a1")],
-                            capsys)
+    code, out = run_example("compare_runs.py", "--before", b0, "--after", a0, a1)
     assert code == 2 and "1 folders before but 2 after" in out.err
-    code, out = run_example(["--before", str(tmp_path / "b0"), "--after", str(tmp_path / "a1")], capsys)
+    code, out = run_example("compare_runs.py", "--before", str(tmp_path / "b0"), "--after", str(tmp_path / "a1"))
     assert "share no run" in str(code)
-    code, out = run_example(["--before", str(tmp_path / "b0"), "--after", str(tmp_path / "nothing")], capsys)
+    code, out = run_example("compare_runs.py", "--before", str(tmp_path / "b0"), "--after", str(tmp_path / "nothing"))
     assert "does not exist" in str(code)

@@ -1,7 +1,5 @@
 """Where the largest cost goes (baselines.cost_anatomy, examples/cost_anatomy.py)."""
 import csv
-import runpy
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,17 +53,7 @@ def test_the_anatomy_averages_the_successful_runs_per_cell(tmp_path):
         cost_anatomy_figure([], tmp_path / "none.png")
 
 
-def run_example(argv, capsys):
-    old, sys.argv = sys.argv, ["cost_anatomy.py", *argv]
-    try:
-        with pytest.raises(SystemExit) as done:
-            runpy.run_path("examples/cost_anatomy.py", run_name="__main__")
-    finally:
-        sys.argv = old
-    return done.value.code, capsys.readouterr()
-
-
-def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, capsys):
+def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, run_example):
     fields = ["method", "agents", "difficulty", "problem", "success", "cost_max", "cost_split"]
     folder = tmp_path / "run"
     folder.mkdir()
@@ -74,40 +62,31 @@ def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, c
         w.writeheader()
         for i, r in enumerate(rows()):
             w.writerow({**r, "problem": i, "cost_max": 1.0})
-    code, out = run_example([str(folder), "--methods", "ours", "--agents", "5", "--figure", str(tmp_path / "c.png")],
-                            capsys)
+    code, out = run_example("cost_anatomy.py", str(folder), "--methods", "ours", "--agents", "5",
+                            "--figure", str(tmp_path / "c.png"))
     assert code == 0 and "| ours | Hard | 5 | 2 | 7.00 |" in out.out and (tmp_path / "c.png").exists()
-    code, out = run_example([str(folder), "--methods", "ours", "--summary"], capsys)  # easy 1.00, hard 7.00
+    code, out = run_example("cost_anatomy.py", str(folder), "--methods", "ours", "--summary")  # easy 1.00, hard 7.00
     assert code == 0 and "| ours | All | 5 | 3 | 4.00 | 2.50 (62%) | 0 | 0 | 0 | 0.50 (12%) | 1.00 (25%) |" in out.out
-    code, out = run_example([str(folder), "--methods", "sorb"], capsys)
+    code, out = run_example("cost_anatomy.py", str(folder), "--methods", "sorb")
     assert "no successful run with a cost split" in str(code)
     old = tmp_path / "old"
     old.mkdir()
     (old / "runs.csv").write_text("method,agents,difficulty,problem,success\nours,5,hard,0,True\n")
-    code, out = run_example([str(old)], capsys)
+    code, out = run_example("cost_anatomy.py", str(old))
     assert "no cost_split column" in str(code)
-    code, out = run_example([str(tmp_path / "nothing")], capsys)
+    code, out = run_example("cost_anatomy.py", str(tmp_path / "nothing"))
     assert "does not exist" in str(code)
 
 
-def test_the_plan_dependencies_example_counts_what_routes_share(capsys):
-    old = sys.argv
-    try:
-        sys.argv = ["plan_dependencies.py", "--env", "SafeCentralObstacle-v0", "--agents", "4", "--problems", "2",
-                    "--nodes", "150", "--seed", "1"]
-        with pytest.raises(SystemExit) as done:
-            runpy.run_path("examples/plan_dependencies.py", run_name="__main__")
-        assert done.value.code == 0
-        out = capsys.readouterr().out
-        rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:5]]
-                for line in out.splitlines() if line.startswith("| sorb") or line.startswith("| ours")}
-        assert set(rows) == {"sorb", "ours"} and all(v[0] >= 0 and v[1] >= 0 and v[2] > 0 for v in rows.values())
-        for argv, message in ((["--agents", "1"], "at least 2"), (["--methods", "constrained_policy"], "only search"),
-                              (["--c-max-from", str(Path("examples/table2/apt3/c_max.json")), "--agents", "3"],
-                               "no c_max for 3 agents")):
-            sys.argv = ["plan_dependencies.py", *argv]
-            with pytest.raises(SystemExit) as done:
-                runpy.run_path("examples/plan_dependencies.py", run_name="__main__")
-            assert done.value.code == 2 and message in capsys.readouterr().err
-    finally:
-        sys.argv = old
+def test_the_plan_dependencies_example_counts_what_routes_share(run_example):
+    code, out = run_example("plan_dependencies.py", "--env", "SafeCentralObstacle-v0", "--agents", "4",
+                            "--problems", "2", "--nodes", "150", "--seed", "1")
+    assert code == 0
+    rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:5]]
+            for line in out.out.splitlines() if line.startswith("| sorb") or line.startswith("| ours")}
+    assert set(rows) == {"sorb", "ours"} and all(v[0] >= 0 and v[1] >= 0 and v[2] > 0 for v in rows.values())
+    for argv, message in ((["--agents", "1"], "at least 2"), (["--methods", "constrained_policy"], "only search"),
+                          (["--c-max-from", str(Path("examples/table2/apt3/c_max.json")), "--agents", "3"],
+                           "no c_max for 3 agents")):
+        code, out = run_example("plan_dependencies.py", *argv)
+        assert code == 2 and message in out.err
