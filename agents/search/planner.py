@@ -19,13 +19,13 @@ and the :class:`~agents.search.controller.WaypointController`:
 5. :meth:`MultiAgentPlan.agent_plans` turns the paths into per-agent waypoint observations
    and departure times for the controller.
 
-If the cost-pruned graph leaves some agent without any path, the cut-off is relaxed around that agent's start
-and goal only (doubling until a path exists; ``MultiAgentPlan.c_max`` reports the largest value used), so the
-rest of the graph stays as safe as asked; with ``relax_cost=False`` the plan is ``"infeasible"`` instead. If
-CBS runs out of time, a second call with a looser suboptimality bound (``fallback_suboptimality``) usually
-finds a plan. Every solver call is budgeted in expansions (``expansion_limit``,
-``prioritized_expansions_per_agent``, ``repair_expansions_per_agent``, ``stepper_expansions_per_agent``), with
-a wall-clock limit (``time_limit``) only as a safety net, so a plan is a function of the problem and the code.
+If the cost-pruned graph leaves some agent without any path, the cut-off is relaxed around that agent's start and
+goal only (doubling until a path exists; ``MultiAgentPlan.c_max`` reports the largest value used), so the rest of
+the graph stays as safe as asked; with ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of
+time, a second call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan. Every
+solver call is budgeted in expansions (``expansion_limit``, ``prioritized_expansions_per_agent``,
+``repair_expansions_per_agent``, ``stepper_expansions_per_agent``), with a wall-clock limit (``time_limit``) only as
+a safety net, so a plan is a function of the problem and the code.
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -277,6 +277,9 @@ class BufferPlanner:
             without the cut-off, and costlier by the critic at all, that route is admitted too: longer and costlier
             buys nothing (``None``: off, the default; :meth:`from_agent` turns it on for agents of panoramas,
             :func:`~agents.search.models.default_detour`).
+        spread_routes: within the ``suboptimality`` bound, prefer routes that pass fewer places near other routes
+            (:class:`~agents.search.mapf.CBSSolver`'s ``spread``): fewer plan-order dependencies, slightly longer
+            routes (off by default: measured on panoramas, it did not pay; see the Planning page of the docs).
         second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
             (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.
@@ -308,6 +311,7 @@ class BufferPlanner:
         max_edges: Optional[int] = None,
         cost_guard: Optional[float] = 2.0,
         detour: Optional[float] = None,
+        spread_routes: bool = False,
         second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     ) -> None:
         self.observations = np.asarray(observations)
@@ -364,6 +368,7 @@ class BufferPlanner:
         self.max_edges = None if max_edges is None else int(max_edges)
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self.detour = None if detour is None else float(detour)
+        self.spread_routes = bool(spread_routes)
         self.second_opinion = second_opinion
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
@@ -394,13 +399,12 @@ class BufferPlanner:
         return dict(
             d_max=self.d_max, c_max=self.c_max, endpoint_edges=self.endpoint_edges,
             proximity_radius=self.proximity_radius, time_model=self.time_model, suboptimality=self.suboptimality,
-            solver=self.solver, expansion_limit=self.expansion_limit,
+            solver=self.solver, expansion_limit=self.expansion_limit, repair_seed=self.repair_seed,
             prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
-            repair_expansions_per_agent=self.repair_expansions_per_agent, repair_seed=self.repair_seed,
-            stepper_expansions_per_agent=self.stepper_expansions_per_agent,
-            time_limit=self.time_limit, relax_cost=self.relax_cost,
+            repair_expansions_per_agent=self.repair_expansions_per_agent, time_limit=self.time_limit,
+            stepper_expansions_per_agent=self.stepper_expansions_per_agent, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
-            max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour)
+            max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour, spread_routes=self.spread_routes)
 
     def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
         """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
@@ -521,12 +525,12 @@ class BufferPlanner:
                 stepped.message = f"{stepped.message} (after prioritized: {res.message})"
                 return stepped, "pibt"
         else:
-            res = CBSSolver(inst, suboptimality=self.suboptimality, time_limit=self.time_limit,
-                            expansion_limit=self.expansion_limit).solve()
             fb = self.fallback_suboptimality
-            if res.status == "timeout" and fb is not None and fb > self.suboptimality:
-                res = CBSSolver(inst, suboptimality=fb, time_limit=self.time_limit,
-                                expansion_limit=self.expansion_limit).solve()
+            for w in (self.suboptimality,) if fb is None or fb <= self.suboptimality else (self.suboptimality, fb):
+                res = CBSSolver(inst, suboptimality=w, time_limit=self.time_limit, expansion_limit=self.expansion_limit,
+                                spread=self.spread_routes).solve()
+                if res.status != "timeout":
+                    break
         if auto and solver == "cbs" and res.status == "timeout":
             repaired = self._repair(inst)
             repaired.message = f"{repaired.message} (after {solver}: {res.message})"

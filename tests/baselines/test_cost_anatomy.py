@@ -79,12 +79,17 @@ def test_the_example_prints_the_split_and_refuses_folders_without_it(tmp_path, r
 
 
 def test_the_plan_dependencies_example_counts_what_routes_share(run_example):
-    code, out = run_example("plan_dependencies.py", "--env", "SafeCentralObstacle-v0", "--agents", "4",
-                            "--problems", "2", "--nodes", "150", "--seed", "1")
-    assert code == 0
-    rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:5]]
-            for line in out.out.splitlines() if line.startswith("| sorb") or line.startswith("| ours")}
+    def rows_of(*extra):
+        code, out = run_example("plan_dependencies.py", "--env", "SafeCentralObstacle-v0", "--agents", "4",
+                                "--problems", "2", "--nodes", "150", "--seed", "1", *extra)
+        assert code == 0
+        return {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:5]]
+                for line in out.out.splitlines() if line.startswith("| sorb") or line.startswith("| ours")}
+
+    rows = rows_of()
     assert set(rows) == {"sorb", "ours"} and all(v[0] >= 0 and v[1] >= 0 and v[2] > 0 for v in rows.values())
+    spread = rows_of("--spread")  # other plans: the planner's spread_routes reaches the solver
+    assert set(spread) == {"sorb", "ours"} and spread != rows
     for argv, message in ((["--agents", "1"], "at least 2"), (["--methods", "constrained_policy"], "only search"),
                           (["--c-max-from", str(Path("examples/table2/apt3/c_max.json")), "--agents", "3"],
                            "no c_max for 3 agents")):

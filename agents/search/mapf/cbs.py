@@ -127,7 +127,7 @@ class CBSSearch(MetaAgentMerging, ConflictClassification, ConflictGraphHeuristic
         ctx = self.ctx
         gid = self.agents[i]
         cc = ctx.compile(gid, cons)
-        res = Reservation(paths, i, self.inst) if len(paths) > 1 else None
+        res = Reservation(paths, i, self.inst, ctx.opt.spread) if len(paths) > 1 else None
         events = space_time_astar(self.inst, gid, cc, res, ctx.deadline, ctx.counter)
         if events is None:
             return None

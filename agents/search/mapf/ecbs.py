@@ -34,7 +34,7 @@ class ECBSSearch(CBSSearch):
         """Agent ``i``'s path of cost within ``w`` x its optimum, few conflicts with ``paths``."""
         ctx = self.ctx
         cc = ctx.compile(i, cons)
-        res = Reservation(paths, i, self.inst) if len(paths) > 1 else None
+        res = Reservation(paths, i, self.inst, ctx.opt.spread) if len(paths) > 1 else None
         out = focal_search(self.inst, i, cc, res, self.w, ctx.deadline, ctx.counter)
         if out is None:
             return None

@@ -124,11 +124,18 @@ class AgentPath:
 
 
 class Reservation:
-    """The other agents' paths as integer sets, for conflict-avoiding tie-breaking."""
+    """The other agents' paths as integer sets, for conflict-avoiding tie-breaking.
 
-    __slots__ = ("occ", "moves", "parked", "horizon")
+    With ``spread`` (durative model only), :attr:`places` also holds every node the other paths
+    visit and the nodes near them, at any time: the low-level searches then prefer, among paths
+    with equally few conflicts, those that enter fewer of those places (see
+    :func:`~agents.search.mapf.successors.make_expander`).
+    """
 
-    def __init__(self, paths: Sequence[Optional[AgentPath]], exclude: int, inst: MapfInstance):
+    __slots__ = ("occ", "moves", "parked", "horizon", "places")
+
+    def __init__(self, paths: Sequence[Optional[AgentPath]], exclude: int, inst: MapfInstance,
+                 spread: bool = False):
         occ: Set[int] = set()
         moves: Set[int] = set()
         parked: Dict[int, int] = {}
@@ -153,6 +160,16 @@ class Reservation:
         self.moves = moves
         self.parked = parked
         self.horizon = horizon
+        places: Set[int] = set()
+        if spread and not inst.unit:
+            for b, p in enumerate(paths):
+                if b != exclude and p is not None:
+                    places.update(p.node_set)
+            if near is not None:
+                for x in list(places):
+                    places.update(near[x])
+        #: nodes on or near the other paths at any time (``spread``; empty otherwise)
+        self.places = places
 
 
 

@@ -170,6 +170,12 @@ class CBSSolver:
         group_budget: the group searches of a solve may expand 50,000 states plus this many
             times the states of the other low-level searches; past that only known joint costs
             (and ancestors' bounds) are used.
+        spread: durative model: the low-level searches prefer, among paths with equally few
+            conflicts, those that enter fewer nodes on or near the other agents' paths at any
+            time (a conflict-avoidance tie-break over places rather than times). Under ECBS the
+            focal search then picks such paths within the suboptimality bound, so the agents'
+            routes share fewer places and the plan orders fewer of them one after another; under
+            optimal CBS it only breaks ties between paths of equal cost. Ignored under unit time.
     """
 
     def __init__(
@@ -207,6 +213,7 @@ class CBSSolver:
         group_limit: int = 4,
         group_node_limit: int = 5_000,
         group_budget: float = 1.0,
+        spread: bool = False,
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -275,6 +282,7 @@ class CBSSolver:
         self.group_limit = int(group_limit)
         self.group_node_limit = int(group_node_limit)
         self.group_budget = float(group_budget)
+        self.spread = bool(spread)
 
     # -------------------------------------------------------------- checks
     def _precheck(self) -> Optional[str]:

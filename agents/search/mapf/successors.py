@@ -39,6 +39,10 @@ NEVER = 1 << 62
 #: A reservation holding nothing: ``(occupied codes, move codes, parked node -> time)``.
 EMPTY_RESERVATION: Tuple[Set[int], Set[int], Dict[int, int]] = (set(), set(), {})
 
+#: With a reservation's ``places`` (spreading routes), a successor's tie-break value is its
+#: conflicts times this plus 1 where it enters one of those places: conflicts still come first.
+SPREAD_WEIGHT = 256
+
 #: ``expand(v, t) -> [(w, t_arrival, n_conflicts), ...]``
 Expander = Callable[[int, int], List[Tuple[int, int, int]]]
 #: node -> ``[(start, end, bound), ...]`` (see :func:`landmarks`)
@@ -50,7 +54,12 @@ _NO_FOREVER: ForeverH = (NEVER, None, None)
 
 
 def make_expander(inst: MapfInstance, cc: CompiledConstraints, res: Optional[Reservation]) -> Expander:
-    """``expand(v, t) -> [(w, t_arrival, n_conflicts), ...]`` under the constraints ``cc``."""
+    """``expand(v, t) -> [(w, t_arrival, n_conflicts), ...]`` under the constraints ``cc``.
+
+    ``n_conflicts`` counts the successor's conflicts with the reservation ``res``; under the
+    durative model, where ``res.places`` is not empty, it is that count times
+    :data:`SPREAD_WEIGHT`, plus 1 for a move into one of those places (routes spread apart).
+    """
     N = inst.n_nodes
     vset, eset, forever = cc.vset, cc.eset, cc.forever
     occ, moves, parked = (res.occ, res.moves, res.parked) if res is not None else EMPTY_RESERVATION
@@ -88,6 +97,7 @@ def make_expander(inst: MapfInstance, cc: CompiledConstraints, res: Optional[Res
         return expand
 
     succ_d = inst.succ_d
+    places = res.places if res is not None else None
 
     def expand_d(v: int, t: int) -> List[Tuple[int, int, int]]:
         out = []
@@ -123,6 +133,8 @@ def make_expander(inst: MapfInstance, cc: CompiledConstraints, res: Optional[Res
                         dc += 1
             if pv is not None and last >= pv:
                 dc += 1
+            if places:
+                dc = dc * SPREAD_WEIGHT + (0 if same or w not in places else 1)
             out.append((w, nt, dc))
         return out
 
