@@ -84,6 +84,24 @@ def pair_runs(before: Iterable[Mapping[str, Any]], after: Iterable[Mapping[str, 
     return list(cells.values())
 
 
+def pair_methods(rows: Iterable[Mapping[str, Any]], first: str, second: str) -> List[CellComparison]:
+    """Pair method ``second``'s runs with method ``first``'s on the same problems of one evaluation
+    (``runs.csv`` rows): ``first`` takes the place of "before" and ``second`` of "after", so a
+    cell's paired difference is ``second``'s largest cost minus ``first``'s over the problems both
+    arrived at (e.g. ``first="sorb", second="ours"``: below zero where ours is cheaper). Each cell
+    is named ``"second - first"``. ``ValueError`` when the rows hold no run of one of them.
+    """
+    if first == second:
+        raise ValueError(f"compare two different methods, got {first!r} twice")
+    name = f"{second} - {first}"
+    rows = list(rows)
+    picked = [[{**r, "method": name} for r in rows if r["method"] == m] for m in (first, second)]
+    for m, runs in zip((first, second), picked):
+        if not runs:
+            raise ValueError(f"the runs hold no run of {m!r} (methods there: {sorted({r['method'] for r in rows})})")
+    return pair_runs(*picked)
+
+
 def paired_interval(before: Sequence[float], after: Sequence[float], resamples: int = 2000,
                     level: float = 0.95, seed: int = 0) -> Tuple[float, float, float]:
     """Mean of ``after - before`` over paired runs and a bootstrap ``level`` interval of it:

@@ -4,7 +4,7 @@ import csv
 import numpy as np
 import pytest
 
-from baselines.compare import comparison_table, merge, pair_runs, paired_interval
+from baselines.compare import comparison_table, merge, pair_methods, pair_runs, paired_interval
 
 FIELDS = ["method", "agents", "difficulty", "problem", "success", "cost_max", "steps"]
 
@@ -45,6 +45,22 @@ def test_the_paired_interval_brackets_the_mean_and_is_empty_for_equal_runs():
     assert all(np.isnan(paired_interval([], [])))
 
 
+def test_two_methods_of_one_evaluation_are_paired_problem_by_problem():
+    runs = (rows([(True, 10.0, 50), (True, 20.0, 60), (False, 0.0, 300)], method="sorb")
+            + rows([(True, 7.0, 40), (False, 0.0, 300), (True, 9.0, 45)])
+            + rows([(True, 1.0, 9)], method="sorb", agents=10) + rows([(True, 4.0, 9)], agents=10))
+    five, ten = pair_methods(runs, "sorb", "ours")
+    assert five.cell == ("ours - sorb", 5, "hard") and ten.cell == ("ours - sorb", 10, "hard")
+    # only sorb arrived at problem 1, only ours at problem 2; both at problem 0: ours 3 cheaper
+    assert (five.lost, five.gained, five.cost_before, five.cost_after) == ([1], [2], [10.0], [7.0])
+    assert paired_interval(five.cost_before, five.cost_after)[0] == -3.0
+    assert (ten.cost_before, ten.cost_after) == ([1.0], [4.0])
+    with pytest.raises(ValueError, match="no run of 'marl'"):
+        pair_methods(runs, "marl", "ours")
+    with pytest.raises(ValueError, match="twice"):
+        pair_methods(runs, "ours", "ours")
+
+
 def test_cells_merge_into_a_total_row():
     one = pair_runs(rows([(True, 1.0, 9), (False, 0, 300)]), rows([(False, 0, 300), (True, 2.0, 9)]))
     two = pair_runs(rows([(True, 4.0, 9)], agents=10), rows([(True, 6.0, 9)], agents=10))
@@ -78,3 +94,13 @@ def test_the_example_compares_folder_pairs_and_refuses_mismatched_folders(tmp_pa
     assert "share no run" in str(code)
     code, out = run_example("compare_runs.py", "--before", str(tmp_path / "b0"), "--after", str(tmp_path / "nothing"))
     assert "does not exist" in str(code)
+    # two methods within each folder: ours against sorb in b0 (problem 0 only: 3.0 against 1.0)
+    code, out = run_example("compare_runs.py", "--between", "sorb", "ours", "--before", b0)
+    assert code == 0 and "## " + b0 + ": ours - sorb" in out.out
+    assert "| ours - sorb, 5 agents, hard | 1 | 1 -> 1 | 0 | 0 | 0 | 1.00 -> 3.00 | +2.00 [" in out.out
+    code, out = run_example("compare_runs.py", "--between", "sorb", "ours", "--before", b0, "--after", a0)
+    assert code == 2 and "give no --after" in out.err
+    code, out = run_example("compare_runs.py", "--before", b0)
+    assert code == 2 and "--after is required" in out.err
+    code, out = run_example("compare_runs.py", "--between", "sorb", "marl", "--before", b0)
+    assert "no run of 'marl'" in str(code)
