@@ -277,9 +277,9 @@ class BufferPlanner:
             without the cut-off, and costlier by the critic at all, that route is admitted too: longer and costlier
             buys nothing (``None``: off, the default; :meth:`from_agent` turns it on for agents of panoramas,
             :func:`~agents.search.models.default_detour`).
-        spread_routes: within the ``suboptimality`` bound, prefer routes that pass fewer places near other routes
-            (:class:`~agents.search.mapf.CBSSolver`'s ``spread``): fewer plan-order dependencies, slightly longer
-            routes (off by default: measured on panoramas, it did not pay; see the Planning page of the docs).
+        spread_routes: of routes equal in cost and conflicts, prefer those that pass fewer places near other routes
+            (:class:`~agents.search.mapf.CBSSolver`'s ``spread``): fewer plan-order dependencies (off by default:
+            on panoramas it lowered the cost but lost runs; see the Planning page of the docs).
         second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
             (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.

@@ -31,6 +31,7 @@ from .successors import (
     FIELD_MASK,
     H_RADIX,
     NEVER,
+    SPREAD_SHIFT,
     Landmarks,
     cut_off,
     forever_h,
@@ -269,7 +270,8 @@ def focal_search(
     """Bounded-suboptimal low level of ECBS: a path of cost <= ``w`` x optimal, few conflicts.
 
     Among the open states whose ``f`` is within ``w`` times the smallest open ``f`` (the
-    focal list) it expands the one with the fewest conflicts with ``res``. Returns
+    focal list) it expands the one with the fewest conflicts with ``res``, then the lowest ``f``,
+    then (a reservation with ``places``) the fewest places entered. Returns
     ``(events, lower_bound)`` where ``lower_bound`` <= the optimal cost under ``cc``.
     """
     counter.calls += 1
@@ -295,7 +297,10 @@ def focal_search(
     parent = {s: -1}
     tclose: Dict[int, int] = {}
     open_f = [(hs, s)]                 # every open entry, by f (for the lower bound)
-    focal = [(0, hs, -0, s, hs)]       # entries with f <= bound, by conflicts then f
+    # entries with f <= bound, by conflicts, then f, then (spreading routes) places entered
+    sh = SPREAD_SHIFT if res is not None and res.places else 0
+    pm = (1 << sh) - 1
+    focal = [(0, hs, 0, -0, s, hs)]
     pending: List[Tuple[int, int, int, int]] = []  # entries with f > bound, by f
     bound = w * hs
     pops = 0
@@ -310,10 +315,11 @@ def focal_search(
             bound = w * fmin
             while pending and pending[0][0] <= bound:
                 f, c, hh, code = pop(pending)
-                push(focal, (c, f, -(f - hh), code, hh))
+                push(focal, (c >> sh, f, c & pm, -(f - hh), code, hh))
         # pop the best focal entry that is still open and current
         while focal:
-            c, f, negt, code, hh = pop(focal)
+            c, f, cp, negt, code, hh = pop(focal)
+            c = (c << sh) | cp
             if code in tclose or best[code] != ((f << fb) | c):
                 continue
             break
@@ -350,7 +356,7 @@ def focal_search(
             parent[ncode] = code
             push(open_f, (nf, ncode))
             if nf <= bound:
-                push(focal, (nc, nf, -nt, ncode, hx))
+                push(focal, (nc >> sh, nf, nc & pm, -nt, ncode, hx))
             else:
                 push(pending, (nf, nc, hx, ncode))
 

@@ -170,12 +170,11 @@ class CBSSolver:
         group_budget: the group searches of a solve may expand 50,000 states plus this many
             times the states of the other low-level searches; past that only known joint costs
             (and ancestors' bounds) are used.
-        spread: durative model: the low-level searches prefer, among paths with equally few
-            conflicts, those that enter fewer nodes on or near the other agents' paths at any
-            time (a conflict-avoidance tie-break over places rather than times). Under ECBS the
-            focal search then picks such paths within the suboptimality bound, so the agents'
-            routes share fewer places and the plan orders fewer of them one after another; under
-            optimal CBS it only breaks ties between paths of equal cost. Ignored under unit time.
+        spread: durative model: the low-level searches prefer, among paths of equal cost and
+            equally few conflicts, those that enter fewer nodes on or near the other agents'
+            paths at any time (a conflict-avoidance tie-break over places rather than times): the
+            agents' routes share fewer places, and the plan orders fewer of them one after
+            another, with routes no longer than without it. Ignored under unit time.
     """
 
     def __init__(

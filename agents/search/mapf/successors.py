@@ -40,8 +40,9 @@ NEVER = 1 << 62
 EMPTY_RESERVATION: Tuple[Set[int], Set[int], Dict[int, int]] = (set(), set(), {})
 
 #: With a reservation's ``places`` (spreading routes), a successor's tie-break value is its
-#: conflicts times this plus 1 where it enters one of those places: conflicts still come first.
-SPREAD_WEIGHT = 256
+#: conflicts shifted left by this many bits plus 1 where it enters one of those places:
+#: conflicts still come first, and the searches compare the two parts separately.
+SPREAD_SHIFT = 8
 
 #: ``expand(v, t) -> [(w, t_arrival, n_conflicts), ...]``
 Expander = Callable[[int, int], List[Tuple[int, int, int]]]
@@ -58,7 +59,8 @@ def make_expander(inst: MapfInstance, cc: CompiledConstraints, res: Optional[Res
 
     ``n_conflicts`` counts the successor's conflicts with the reservation ``res``; under the
     durative model, where ``res.places`` is not empty, it is that count times
-    :data:`SPREAD_WEIGHT`, plus 1 for a move into one of those places (routes spread apart).
+    ``2 ** SPREAD_SHIFT`` (:data:`SPREAD_SHIFT`), plus 1 for a move into one of those places (routes
+    spread apart).
     """
     N = inst.n_nodes
     vset, eset, forever = cc.vset, cc.eset, cc.forever
@@ -134,7 +136,7 @@ def make_expander(inst: MapfInstance, cc: CompiledConstraints, res: Optional[Res
             if pv is not None and last >= pv:
                 dc += 1
             if places:
-                dc = dc * SPREAD_WEIGHT + (0 if same or w not in places else 1)
+                dc = (dc << SPREAD_SHIFT) + (0 if same or w not in places else 1)
             out.append((w, nt, dc))
         return out
 
