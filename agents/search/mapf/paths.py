@@ -127,8 +127,8 @@ class Reservation:
     """The other agents' paths as integer sets, for conflict-avoiding tie-breaking.
 
     With ``spread`` (durative model only), :attr:`places` also holds every node the other paths
-    visit and the nodes near them, at any time: the low-level searches then prefer, among paths
-    with equally few conflicts, those that enter fewer of those places (see
+    visit and the nodes near them, at any time: the low-level searches then prefer, of paths
+    equal in cost and conflicts, those that enter fewer of those places (see
     :func:`~agents.search.mapf.successors.make_expander`).
     """
 

@@ -41,7 +41,8 @@ EMPTY_RESERVATION: Tuple[Set[int], Set[int], Dict[int, int]] = (set(), set(), {}
 
 #: With a reservation's ``places`` (spreading routes), a successor's tie-break value is its
 #: conflicts shifted left by this many bits plus 1 where it enters one of those places:
-#: conflicts still come first, and the searches compare the two parts separately.
+#: conflicts still come first, and the searches compare the two parts separately (a path that
+#: enters more than 255 such places would carry into the conflicts' part).
 SPREAD_SHIFT = 8
 
 #: ``expand(v, t) -> [(w, t_arrival, n_conflicts), ...]``
