@@ -5,7 +5,8 @@ evaluate`` (ours with its cost cut-off from a ``c_max.json``) and the plan is co
 that a pair of routes both visit, and the plan-order dependencies the controller derives from
 them (an agent waits at a waypoint until the agent the plan sends first has passed). Shared places
 are what makes agents hold for one another when one of them runs late (see the cost anatomy,
-``examples/cost_anatomy.py``). ``--spread`` plans with the planner's ``spread_routes``.
+``examples/cost_anatomy.py``). ``--spread MODE`` plans with the planner's ``spread_routes`` set to
+MODE.
 
     python examples/plan_dependencies.py --env SafeApartment3-v0 --agents 10 --seed 4 --problems 20 \\
         --c-max-from examples/table2/apt3/c_max.json
@@ -31,8 +32,9 @@ def main(argv=None) -> int:
     p.add_argument("--nodes", type=int, default=1000, help="graph nodes (safe-mapf evaluate's default)")
     p.add_argument("--methods", nargs="+", default=["sorb", "ours"], help="search methods to compare")
     p.add_argument("--c-max-from", type=Path, default=None, help="ours' cut-off per agent count (a c_max.json)")
-    p.add_argument("--spread", action="store_true",
-                   help="plan with spread_routes: routes that pass fewer places near other routes")
+    p.add_argument("--spread", default=None, choices=["off", "routes", "near"],
+                   help="the planner's spread_routes: of equal routes, those that pass fewer nodes of other "
+                        "routes (routes) or also fewer nodes near them (near); default: the planner's")
     args = p.parse_args(argv)
     if args.agents < 2:
         p.error(f"--agents must be at least 2 to share anything, got {args.agents}")
@@ -63,7 +65,9 @@ def main(argv=None) -> int:
     for m in methods:
         if chosen is not None and math.isfinite(m.c_max):
             m = m.with_options(c_max=float(chosen))
-        planner = setup.planner.with_options(c_max=m.c_max, spread_routes=args.spread)
+        planner = setup.planner.with_options(c_max=m.c_max)
+        if args.spread is not None:
+            planner = planner.with_options(spread_routes=args.spread)
         shared, deps, soc = [], [], []
         for prob in problems:
             obs, _ = env.reset(seed=args.seed + prob.index, options={"starts": prob.starts, "goals": prob.goals})

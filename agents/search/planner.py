@@ -54,6 +54,7 @@ from .graph import (
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.lns import solve_lns
+from .mapf.paths import spread_mode
 from .mapf.pibt import solve_pibt
 from .mapf.prioritized import solve_prioritized
 from .models import default_detour
@@ -277,9 +278,9 @@ class BufferPlanner:
             without the cut-off, and costlier by the critic at all, that route is admitted too: longer and costlier
             buys nothing (``None``: off, the default; :meth:`from_agent` turns it on for agents of panoramas,
             :func:`~agents.search.models.default_detour`).
-        spread_routes: of routes equal in cost and conflicts, prefer those that pass fewer places near other routes
-            (:class:`~agents.search.mapf.CBSSolver`'s ``spread``): fewer plan-order dependencies (off by default:
-            on panoramas it lowered the cost but lost runs; see the Planning page of the docs).
+        spread_routes: :class:`~agents.search.mapf.CBSSolver`'s ``spread``: of routes equal in cost and conflicts,
+            those through fewer nodes of (``"routes"``) or near (``"near"``) other routes; fewer plan-order dependencies
+            (``"off"`` by default: on panoramas it lost runs or little cost; see the Planning page of the docs).
         second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
             (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.
@@ -311,7 +312,7 @@ class BufferPlanner:
         max_edges: Optional[int] = None,
         cost_guard: Optional[float] = 2.0,
         detour: Optional[float] = None,
-        spread_routes: bool = False,
+        spread_routes: str = "off",
         second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     ) -> None:
         self.observations = np.asarray(observations)
@@ -368,7 +369,7 @@ class BufferPlanner:
         self.max_edges = None if max_edges is None else int(max_edges)
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self.detour = None if detour is None else float(detour)
-        self.spread_routes = bool(spread_routes)
+        self.spread_routes = spread_mode(spread_routes)
         self.second_opinion = second_opinion
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)

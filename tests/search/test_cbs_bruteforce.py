@@ -76,7 +76,8 @@ def test_durative_random_graphs_match_brute_force(seed):
     edges = random_graph(rng, n, 0.15, max_dur=3)
     starts, goals = pick(rng, n, 2, crossing=seed % 2 == 0)
     check(n, edges, starts, goals, "durative")
-    check(n, edges, starts, goals, "durative", spread=True)  # spreading routes only breaks ties
+    for spread in ("routes", "near"):  # spreading routes only breaks ties
+        check(n, edges, starts, goals, "durative", spread=spread)
 
 
 @pytest.mark.parametrize("seed", range(30))
@@ -127,11 +128,12 @@ def test_proximity_matches_brute_force(seed):
     starts, goals = pick(rng, n, 2, crossing=seed % 3 == 0)
     model = "unit" if seed % 2 else "durative"
     check(n, edges, starts, goals, model, proximity=Proximity(dist, radius), near=near)
-    res = check(n, edges, starts, goals, model, proximity=Proximity(dist, radius), near=near, spread=True)
+    spread = ("routes", "near")[seed % 2]
+    res = check(n, edges, starts, goals, model, proximity=Proximity(dist, radius), near=near, spread=spread)
     if res is not None and model == "durative":  # bounded: spreading may take longer routes, never too long
         adj = adjacency(n, edges)
         sub = solve_cbs(adj, starts, goals, time_model=model, proximity=Proximity(dist, radius), suboptimality=1.5,
-                        spread=True, time_limit=20)
+                        spread=spread, time_limit=20)
         assert res.soc <= sub.soc <= 1.5 * res.soc
         assert validate(adj, starts, goals, sub.paths, time_model=model, proximity=Proximity(dist, radius)) == []
 

@@ -32,18 +32,43 @@ def test_equal_routes_spread_only_when_asked(suboptimality):
     # node 1 is the lower id, so without spreading the tie goes its way
     adj = two_routes(1, 6, detour=0)
     plain = solve_cbs(adj, [1, 3], [2, 4], time_model="durative", suboptimality=suboptimality)
-    spread = solve_cbs(adj, [1, 3], [2, 4], time_model="durative", suboptimality=suboptimality, spread=True)
     assert 1 in nodes_of(plain.paths[1])
-    assert 1 not in nodes_of(spread.paths[1]) and 6 in nodes_of(spread.paths[1])
-    assert spread.soc == plain.soc == 1 + 4
-    assert validate(adj, [1, 3], [2, 4], spread.paths, time_model="durative") == []
+    for mode in ("routes", "near"):
+        spread = solve_cbs(adj, [1, 3], [2, 4], time_model="durative", suboptimality=suboptimality, spread=mode)
+        assert 1 not in nodes_of(spread.paths[1]) and 6 in nodes_of(spread.paths[1])
+        assert spread.soc == plain.soc == 1 + 4
+        assert validate(adj, [1, 3], [2, 4], spread.paths, time_model="durative") == []
+
+
+@pytest.mark.parametrize("suboptimality", [1.0, 1.5])
+def test_near_also_avoids_the_neighbours_of_other_routes(suboptimality):
+    # node 6 lies near agent 0's start (left at time 1, so no conflict when agent 1 passes at time 3)
+    adj = two_routes(6, 7, detour=0)
+    dist = np.full((8, 8), 10.0)
+    dist[1, 6] = dist[6, 1] = 1.0
+    prox = Proximity(dist, 1.5)
+    kw = dict(time_model="durative", proximity=prox, suboptimality=suboptimality)
+    plain = solve_cbs(adj, [1, 3], [2, 4], **kw)
+    routes = solve_cbs(adj, [1, 3], [2, 4], spread="routes", **kw)
+    near = solve_cbs(adj, [1, 3], [2, 4], spread="near", **kw)
+    assert 6 in nodes_of(plain.paths[1]) and 6 in nodes_of(routes.paths[1])
+    assert 6 not in nodes_of(near.paths[1]) and 7 in nodes_of(near.paths[1])
+    assert near.soc == routes.soc == plain.soc
+    assert validate(adj, [1, 3], [2, 4], near.paths, time_model="durative", proximity=prox) == []
+
+
+@pytest.mark.parametrize("bad", [True, 1, "nodes", None])
+def test_a_spread_mode_that_does_not_exist_is_refused(bad):
+    adj = two_routes(1, 6, detour=0)
+    with pytest.raises(ValueError, match="spread must be one of 'off', 'routes', 'near'"):
+        solve_cbs(adj, [1, 3], [2, 4], time_model="durative", spread=bad)
 
 
 def test_spreading_never_takes_a_longer_route():
     # by node 6 one step longer: within ECBS's bound, but spreading only breaks ties
     adj = two_routes(1, 6, detour=1)
     for w in (1.0, 1.5):
-        res = solve_cbs(adj, [1, 3], [2, 4], time_model="durative", suboptimality=w, spread=True)
+        res = solve_cbs(adj, [1, 3], [2, 4], time_model="durative", suboptimality=w, spread="near")
         assert 1 in nodes_of(res.paths[1]) and res.soc == 5
 
 
@@ -53,12 +78,13 @@ def test_places_hold_the_other_routes_and_their_neighbours():
     dist[2, 7] = dist[7, 2] = 1.0  # node 7 lies near agent 0's goal
     inst = MapfInstance(adj, [1, 3], [2, 4], time_model="durative", proximity=Proximity(dist, 1.5))
     other = AgentPath([(1, 0), (2, 1)], inst)
-    assert Reservation([other, None], 1, inst, spread=True).places == {1, 2, 7}
+    assert Reservation([other, None], 1, inst, spread="near").places == {1, 2, 7}
+    assert Reservation([other, None], 1, inst, spread="routes").places == {1, 2}
     assert Reservation([other, None], 1, inst).places == set()
-    assert Reservation([other, None], 0, inst, spread=True).places == set()  # its own path is no other's
+    assert Reservation([other, None], 0, inst, spread="near").places == set()  # its own path is no other's
     unit = MapfInstance(adj, [1, 3], [2, 4], time_model="unit")
-    assert Reservation([AgentPath([(1, 0), (2, 1)], unit), None], 1, unit, spread=True).places == set()
-    assert CBSSolver(inst, spread=True).spread and not CBSSolver(inst).spread
+    assert Reservation([AgentPath([(1, 0), (2, 1)], unit), None], 1, unit, spread="near").places == set()
+    assert CBSSolver(inst, spread="routes").spread == "routes" and CBSSolver(inst).spread == "off"
 
 
 def test_a_successor_counts_conflicts_first_and_places_second():
@@ -66,7 +92,7 @@ def test_a_successor_counts_conflicts_first_and_places_second():
     inst = MapfInstance(adj, [1, 3], [2, 4], time_model="durative")
     other = AgentPath([(1, 0), (2, 1)], inst)  # at 1 during step 0, parked at 2 from time 1
     cc = compile_constraints(EMPTY, inst.n_nodes, 4)
-    spread = make_expander(inst, cc, Reservation([other, None], 1, inst, spread=True))
+    spread = make_expander(inst, cc, Reservation([other, None], 1, inst, spread="routes"))
     plain = make_expander(inst, cc, Reservation([other, None], 1, inst))
     # 0 -> 1 during step 0 meets agent 0 at node 1 and enters one of its places
     assert (1, 1, (1 << SPREAD_SHIFT) + 1) in spread(0, 0) and (1, 1, 1) in plain(0, 0)
@@ -97,8 +123,10 @@ def test_planner_passes_spread_routes_to_the_solver(monkeypatch):
         return np.maximum(d, 1.0), np.zeros_like(d)
 
     D, C = pairwise(pts, pts)
-    planner = BufferPlanner(pts, D, C, pairwise, d_max=1.5, spread_routes=True)
-    assert planner.options()["spread_routes"] and planner.with_options(c_max=2.0).spread_routes
-    assert not BufferPlanner(pts, D, C, pairwise, d_max=1.5).spread_routes
+    planner = BufferPlanner(pts, D, C, pairwise, d_max=1.5, spread_routes="near")
+    assert planner.options()["spread_routes"] == planner.with_options(c_max=2.0).spread_routes == "near"
+    assert BufferPlanner(pts, D, C, pairwise, d_max=1.5).spread_routes == "off"
     plan = planner.plan(pts[[0, 3]], pts[[2, 5]])
-    assert plan.solved and seen == [True]
+    assert plan.solved and seen == ["near"]
+    with pytest.raises(ValueError, match="spread must be one of"):
+        BufferPlanner(pts, D, C, pairwise, d_max=1.5, spread_routes=True)

@@ -109,6 +109,7 @@ from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
 from .lns import solve_lns
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
+from .paths import SPREAD_MODES
 from .pibt import solve_pibt
 from .prioritized import solve_prioritized
 from .result import STATUSES, CBSResult, CBSStats
@@ -120,7 +121,8 @@ __all__ = [
     "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "DEFAULT_MERGE_THRESHOLD", "DeadlineConstraint", "EDGE", "EMPTY",
     "EdgeConstraint", "FOREVER", "GridInstance",
     "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
-    "RangeConstraint", "SEMI_CARDINAL", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
+    "RangeConstraint", "SEMI_CARDINAL", "SPREAD_MODES", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS",
+    "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
     "load_map", "load_scen", "solve_cbs", "solve_lns", "solve_pibt", "solve_prioritized", "validate",
 ]

@@ -123,19 +123,30 @@ class AgentPath:
         return (u,) if u == v else (u, v)
 
 
+#: how the low-level searches spread routes apart (:class:`Reservation`'s ``spread``)
+SPREAD_MODES = ("off", "routes", "near")
+
+
+def spread_mode(value: str) -> str:
+    """``value`` if it is one of :data:`SPREAD_MODES`, else a ``ValueError`` naming them."""
+    if not isinstance(value, str) or value not in SPREAD_MODES:
+        raise ValueError(f"spread must be one of {', '.join(map(repr, SPREAD_MODES))}, got {value!r}")
+    return value
+
+
 class Reservation:
     """The other agents' paths as integer sets, for conflict-avoiding tie-breaking.
 
-    With ``spread`` (durative model only), :attr:`places` also holds every node the other paths
-    visit and the nodes near them, at any time: the low-level searches then prefer, of paths
-    equal in cost and conflicts, those that enter fewer of those places (see
-    :func:`~agents.search.mapf.successors.make_expander`).
+    ``spread`` (durative model only) fills :attr:`places`: ``"routes"`` with every node the other
+    paths visit, at any time, ``"near"`` with those and the nodes near them (``"off"``: empty).
+    The low-level searches then prefer, of paths equal in cost and conflicts, those that enter
+    fewer of those places (see :func:`~agents.search.mapf.successors.make_expander`).
     """
 
     __slots__ = ("occ", "moves", "parked", "horizon", "places")
 
     def __init__(self, paths: Sequence[Optional[AgentPath]], exclude: int, inst: MapfInstance,
-                 spread: bool = False):
+                 spread: str = "off"):
         occ: Set[int] = set()
         moves: Set[int] = set()
         parked: Dict[int, int] = {}
@@ -161,14 +172,14 @@ class Reservation:
         self.parked = parked
         self.horizon = horizon
         places: Set[int] = set()
-        if spread and not inst.unit:
+        if spread_mode(spread) != "off" and not inst.unit:
             for b, p in enumerate(paths):
                 if b != exclude and p is not None:
                     places.update(p.node_set)
-            if near is not None:
+            if spread == "near" and near is not None:
                 for x in list(places):
                     places.update(near[x])
-        #: nodes on or near the other paths at any time (``spread``; empty otherwise)
+        #: nodes on (``spread="routes"``) or also near (``"near"``) the other paths at any time
         self.places = places
 
 

@@ -22,6 +22,7 @@ from .ecbs import ECBSSearch
 from .feasibility import infeasible_component
 from .instance import GraphLike, MapfInstance, ProximityLike
 from .lowlevel import SearchTimeout
+from .paths import spread_mode
 from .result import CBSResult
 from .symmetry import GridGeometry
 
@@ -171,10 +172,12 @@ class CBSSolver:
             times the states of the other low-level searches; past that only known joint costs
             (and ancestors' bounds) are used.
         spread: durative model: the low-level searches prefer, among paths of equal cost and
-            equally few conflicts, those that enter fewer nodes on or near the other agents'
-            paths at any time (a conflict-avoidance tie-break over places rather than times): the
-            agents' routes share fewer places, and the plan orders fewer of them one after
-            another, with routes no longer than without it. Ignored under unit time.
+            equally few conflicts, those that enter fewer of the places the other agents' paths
+            take at any time (a conflict-avoidance tie-break over places rather than times):
+            ``"routes"`` counts the nodes on the other paths, ``"near"`` those and the nodes near
+            them, ``"off"`` none. The agents' routes share fewer places, and the plan orders
+            fewer of them one after another, with routes no longer than without it. Ignored
+            under unit time.
     """
 
     def __init__(
@@ -212,7 +215,7 @@ class CBSSolver:
         group_limit: int = 4,
         group_node_limit: int = 5_000,
         group_budget: float = 1.0,
-        spread: bool = False,
+        spread: str = "off",
     ) -> None:
         if isinstance(instance, MapfInstance):
             if starts is not None or goals is not None:
@@ -281,7 +284,7 @@ class CBSSolver:
         self.group_limit = int(group_limit)
         self.group_node_limit = int(group_node_limit)
         self.group_budget = float(group_budget)
-        self.spread = bool(spread)
+        self.spread = spread_mode(spread)
 
     # -------------------------------------------------------------- checks
     def _precheck(self) -> Optional[str]:
