@@ -55,6 +55,8 @@ class Method:
             :class:`~agents.search.controller.WaypointController`).
         repair_routes: an agent about to set off along an edge another agent failed on in the run
             plans around it first (:class:`~agents.search.policy.SearchPolicy`'s ``repair_routes``).
+        spread_routes: the planner's ``spread_routes`` (``"off"``, ``"routes"`` or ``"near"``; see
+            :class:`~agents.search.planner.BufferPlanner`); ``None``: the planner's own.
     """
 
     name: str
@@ -66,6 +68,7 @@ class Method:
     hold: Optional[str] = None
     fallback: Optional[str] = None
     repair_routes: bool = False
+    spread_routes: Optional[str] = None
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -152,7 +155,10 @@ def execute(
     if method.search:
         if planner is None:
             raise ValueError(f"method {method.name!r} needs a planner")
-        planner_m = planner.with_options(c_max=method.c_max) if planner.c_max != method.c_max else planner
+        changes: Dict[str, Any] = {"c_max": method.c_max} if planner.c_max != method.c_max else {}
+        if method.spread_routes not in (None, planner.spread_routes):
+            changes["spread_routes"] = method.spread_routes
+        planner_m = planner.with_options(**changes) if changes else planner
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
                           seed=seed, fallback_model=models[method.fallback] if method.fallback else None,

@@ -76,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--repair-routes", action="store_true",
                    help="the search methods' agents about to set off along an edge another agent failed on in the "
                         "run plan around it first (SearchPolicy's repair_routes; default off)")
+    p.add_argument("--spread-routes", choices=("off", "routes", "near"), default=None,
+                   help="the search methods' plans prefer, of routes equal in cost and conflicts, those through "
+                        "fewer nodes of other routes ('routes') or also near them ('near'); BufferPlanner's "
+                        "spread_routes; default: the planner's ('off')")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -263,6 +267,8 @@ def run(args: argparse.Namespace) -> int:
         methods = [m.with_options(hold=args.hold) if m.search else m for m in methods]
     if args.repair_routes:
         methods = [m.with_options(repair_routes=True) if m.search else m for m in methods]
+    if args.spread_routes is not None:
+        methods = [m.with_options(spread_routes=args.spread_routes) if m.search else m for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
 
@@ -320,6 +326,8 @@ def run(args: argparse.Namespace) -> int:
     if args.repair_routes:
         header += ("--repair-routes: an agent about to set off along an edge another agent failed on plans "
                    "around it first\n\n")
+    if args.spread_routes is not None:
+        header += f"--spread-routes {args.spread_routes}: the search methods' plans spread routes that way\n\n"
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
@@ -401,7 +409,8 @@ def _run_paper(args: argparse.Namespace) -> int:
             raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
                              "0.1 .. 1, chosen per cell on the test problems)")
     for flag, value in (("--hold", args.hold), ("--repair-problems", args.repair_problems or None),
-                        ("--sparsify", args.sparsify), ("--max-edges", args.max_edges)):
+                        ("--sparsify", args.sparsify), ("--max-edges", args.max_edges),
+                        ("--spread-routes", args.spread_routes)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
                              "open loop)")

@@ -274,30 +274,46 @@ def test_c_max_from_an_earlier_validation_is_checked_before_any_work(tmp_path, c
 
 
 def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_path, capsys, monkeypatch):
-    """``--fallback`` reaches the constrained searches, ``--repair-routes`` every search method."""
+    """``--fallback`` reaches the constrained searches, ``--repair-routes`` and ``--spread-routes`` every
+    search method (the latter its planner)."""
     import baselines.evaluation as ev
+    import baselines.methods as bm
     from baselines.cli import main
 
     seen = {}
     real = ev.execute
+    real_policy = bm.SearchPolicy
 
     def spy(env, method, models, *args, **kwargs):
-        seen[method.name] = (method.fallback, method.repair_routes)
+        seen[method.name] = (method.fallback, method.repair_routes, method.spread_routes)
         return real(env, method, models, *args, **kwargs)
 
+    planners = []
+
+    def policy_spy(planner, *args, **kwargs):
+        planners.append(None if planner is None else planner.spread_routes)
+        return real_policy(planner, *args, **kwargs)
+
     monkeypatch.setattr(ev, "execute", spy)
+    monkeypatch.setattr(bm, "SearchPolicy", policy_spy)
     code = main(["evaluate", "--agents", "1", "--problems", "1", "--difficulty", "easy", "--methods", "sorb",
                  "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--json", "--fallback",
-                 "--repair-routes", "--out", str(tmp_path)])
+                 "--repair-routes", "--spread-routes", "routes", "--out", str(tmp_path)])
     assert code == 0
-    assert seen == {"sorb": (None, True), "constrained_policy": (None, False), "ours": ("unconstrained", True)}
+    assert seen == {"sorb": (None, True, "routes"), "constrained_policy": (None, False, None),
+                    "ours": ("unconstrained", True, "routes")}
+    assert sorted(planners, key=str) == [None, "routes", "routes"]  # the plain policy has no planner
     table = (tmp_path / "table.md").read_text()
     assert "--fallback: the constrained searches" in table and "--repair-routes: an agent" in table
+    assert "--spread-routes routes:" in table
     capsys.readouterr()
-    for flag in ("--fallback", "--repair-routes"):
-        assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", flag,
+    for argv in (["--fallback"], ["--repair-routes"], ["--spread-routes", "near"]):
+        assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", *argv,
                      "--out", str(tmp_path / "p")]) == 2
-        assert f"{flag} does not apply" in capsys.readouterr().err
+        assert f"{argv[0]} does not apply" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--spread-routes", "yes", "--out", str(tmp_path / "q")])
+    assert "invalid choice" in capsys.readouterr().err
 
 
 def test_the_graph_learns_repairs_on_other_problems_and_keeps_them_frozen(setup, monkeypatch):
