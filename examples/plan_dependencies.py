@@ -23,6 +23,8 @@ import numpy as np
 
 
 def main(argv=None) -> int:
+    from agents.search.mapf import SPREAD_MODES
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--env", default="SafeApartment3-v0", help="a registered env id with shipped agents")
     p.add_argument("--agents", type=int, default=10, help="agents per problem")
@@ -32,7 +34,7 @@ def main(argv=None) -> int:
     p.add_argument("--nodes", type=int, default=1000, help="graph nodes (safe-mapf evaluate's default)")
     p.add_argument("--methods", nargs="+", default=["sorb", "ours"], help="search methods to compare")
     p.add_argument("--c-max-from", type=Path, default=None, help="ours' cut-off per agent count (a c_max.json)")
-    p.add_argument("--spread", default=None, choices=["off", "routes", "near"],
+    p.add_argument("--spread", default=None, choices=SPREAD_MODES,
                    help="the planner's spread_routes: of equal routes, those that pass fewer nodes of other "
                         "routes (routes) or also fewer nodes near them (near); default: the planner's")
     args = p.parse_args(argv)

@@ -9,6 +9,7 @@ import time
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from agents.search.mapf import SPREAD_MODES
     from baselines.evaluation import DIFFICULTIES
     from baselines.methods import DEFAULT_METHODS, MARL_METHODS, METHODS, PAPER_METHODS
 
@@ -76,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--repair-routes", action="store_true",
                    help="the search methods' agents about to set off along an edge another agent failed on in the "
                         "run plan around it first (SearchPolicy's repair_routes; default off)")
-    p.add_argument("--spread-routes", choices=("off", "routes", "near"), default=None,
+    p.add_argument("--spread-routes", choices=SPREAD_MODES, default=None,
                    help="the search methods' plans prefer, of routes equal in cost and conflicts, those through "
                         "fewer nodes of other routes ('routes') or also near them ('near'); BufferPlanner's "
                         "spread_routes; default: the planner's ('off')")

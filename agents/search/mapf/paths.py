@@ -172,7 +172,7 @@ class Reservation:
         self.parked = parked
         self.horizon = horizon
         places: Set[int] = set()
-        if spread_mode(spread) != "off" and not inst.unit:
+        if spread != "off" and not inst.unit:  # checked once by the solver (spread_mode), not per search
             for b, p in enumerate(paths):
                 if b != exclude and p is not None:
                     places.update(p.node_set)
