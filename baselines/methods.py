@@ -57,6 +57,8 @@ class Method:
             plans around it first (:class:`~agents.search.policy.SearchPolicy`'s ``repair_routes``).
         spread_routes: the planner's ``spread_routes`` (``"off"``, ``"routes"`` or ``"near"``; see
             :class:`~agents.search.planner.BufferPlanner`); ``None``: the planner's own.
+        max_leg: the planner's ``max_leg`` (no leg its second critic reads beyond this many steps);
+            ``None``: the planner's own.
     """
 
     name: str
@@ -69,6 +71,7 @@ class Method:
     fallback: Optional[str] = None
     repair_routes: bool = False
     spread_routes: Optional[str] = None
+    max_leg: Optional[float] = None
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -158,6 +161,8 @@ def execute(
         changes: Dict[str, Any] = {"c_max": method.c_max} if planner.c_max != method.c_max else {}
         if method.spread_routes not in (None, planner.spread_routes):
             changes["spread_routes"] = method.spread_routes
+        if method.max_leg not in (None, planner.max_leg):
+            changes["max_leg"] = method.max_leg
         planner_m = planner.with_options(**changes) if changes else planner
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,

@@ -21,9 +21,10 @@ from .controller import AgentPlan, WaypointController
 from .graph import ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf import CBSResult, CBSSolver, MapfInstance, Proximity, integer_durations, solve_cbs, validate
 from .models import distance_fn, policy_fn
-from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+from .planner import BufferPlanner, MultiAgentPlan
 from .policy import SearchPolicy
 from .single import Plan, risk_bounded_path, shortest_path
+from .waypoints import direct_plans
 
 __all__ = [
     "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "ProblemGraph",

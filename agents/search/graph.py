@@ -21,7 +21,7 @@ from typing import Callable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 from scipy import sparse
 
-from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, relax_cost_locally
+from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, long_legs, relax_cost_locally
 from .sparsify import cap_out_edges
 
 #: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
@@ -493,6 +493,7 @@ def build_problem_graph(
     detour: Optional[float] = None, second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
     attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
+    max_leg: Optional[float] = None, long_buffer_legs: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -516,7 +517,9 @@ def build_problem_graph(
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
     still pass them. ``attached``: what :func:`attach_endpoints` returns for these starts and goals,
     where it was computed before (it is the expensive step: the critic scores every new pair), and
-    ``passing`` what :func:`passing_edges` returns for them and ``avoid``.
+    ``passing`` what :func:`passing_edges` returns for them and ``avoid``. ``max_leg``: no edge that
+    ``second_opinion`` reads beyond this many steps is admitted (:func:`~agents.search.pruning.long_legs`;
+    ``long_buffer_legs``: those between buffer nodes, where the caller has them).
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -538,6 +541,10 @@ def build_problem_graph(
     if attached is None:
         attached = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
     D2, C2, obs = attached
+    if max_leg is not None:
+        if second_opinion is None:
+            raise ValueError("max_leg needs a second_opinion to read the legs with")
+        ee = np.concatenate([ee, long_legs(D2, obs, n, d_max, second_opinion, max_leg, long_buffer_legs)])
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False
     keep[:, ex] = False

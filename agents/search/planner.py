@@ -58,9 +58,10 @@ from .mapf.paths import spread_mode
 from .mapf.pibt import solve_pibt
 from .mapf.prioritized import solve_prioritized
 from .models import default_detour
-from .pruning import route_from_predecessors
+from .pruning import long_legs, route_from_predecessors
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .sparsify import two_way_consistent
+from .waypoints import waypoints_from_paths
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
 SOLVERS = ("auto", "cbs", "prioritized", "lns", "pibt")
@@ -175,48 +176,6 @@ class MultiAgentPlan:
         return out
 
 
-def direct_plans(goals: np.ndarray, names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:
-    """Plans without search: every agent heads straight for its goal."""
-    goals = np.asarray(goals)
-    names = list(names) if names is not None else [f"agent_{i}" for i in range(len(goals))]
-    return {n: AgentPlan(waypoints=goals[:0], goal=goals[i]) for i, n in enumerate(names)}
-
-
-def waypoints_from_paths(paths: Sequence[Sequence[Tuple[int, int]]]):
-    """Split CBS timed paths into per-agent waypoints.
-
-    A path is ``[(node, time), ...]``; repeated nodes are waits. Returns ``(nodes,
-    depart_times, node_arrivals, arrivals)``: per agent the nodes before the goal, the time it
-    leaves each (its last entry there), the time it gets to each (its first entry) and the time
-    of its final arrival at the goal.
-    """
-    all_nodes, all_depart, all_arrive, arrivals = [], [], [], []
-    for path in paths:
-        if not path:
-            raise ValueError("empty path")
-        nodes: List[int] = []
-        depart: List[int] = []
-        arrive: List[int] = []
-        for node, t in path[:-1]:
-            if nodes and nodes[-1] == node:
-                depart[-1] = int(t)
-            else:
-                nodes.append(int(node))
-                depart.append(int(t))
-                arrive.append(int(t))
-        goal, t_end = path[-1]
-        if nodes and nodes[-1] == goal:
-            # the agent reached its goal earlier and waited there: it arrives at that first visit
-            nodes.pop()
-            depart.pop()
-            arrive.pop()
-        all_nodes.append(nodes)
-        all_depart.append(depart)
-        all_arrive.append(arrive)
-        arrivals.append(int(t_end))
-    return all_nodes, all_depart, all_arrive, arrivals
-
-
 class BufferPlanner:
     """Plans waypoints for several agents (CBS / ECBS, or prioritised planning) on a graph of observations.
 
@@ -262,7 +221,7 @@ class BufferPlanner:
         time_limit: seconds for one solver call, a safety net behind ``expansion_limit``. Either ends the call with
             status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report infeasible); see
-            :meth:`_connect`.
+            :func:`~agents.search.pruning.relax_cost_locally`.
         fallback_suboptimality: if CBS runs out of time, one more try with this (larger) suboptimality bound and the
             same time limit (``None``: no second try).
         budget_labels: label limit of the exact risk-bounded search of :meth:`plan`'s budget mode; past it, a
@@ -284,6 +243,11 @@ class BufferPlanner:
         second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
             (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.
+        max_leg: no edge that ``second_opinion`` reads beyond this many steps is planned, nor admitted past the cost
+            cut-off (:func:`~agents.search.pruning.long_legs`; needs ``second_opinion``); e.g. the controller's
+            ``fallback_beyond``, where the second opinion is the driver's critic: such a leg would go to the
+            fallback policy at once. ``None``: off (the default; on panoramas it did not lower the cost, see the
+            Planning page of the docs).
     """
 
     def __init__(
@@ -314,6 +278,7 @@ class BufferPlanner:
         detour: Optional[float] = None,
         spread_routes: str = "off",
         second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
+        max_leg: Optional[float] = None,
     ) -> None:
         self.observations = np.asarray(observations)
         n = len(self.observations)
@@ -356,6 +321,8 @@ class BufferPlanner:
                 raise ValueError(f"{name} must be >= 1 or None, got {factor!r}")
         if max_edges is not None and int(max_edges) < 1:
             raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
+        if max_leg is not None and not (max_leg > 0 and second_opinion is not None):
+            raise ValueError(f"max_leg must be > 0 and needs a second_opinion to read legs with, got {max_leg!r}")
         self.solver = solver
         limits = (expansion_limit, prioritized_expansions_per_agent, repair_expansions_per_agent,
                   stepper_expansions_per_agent)
@@ -371,6 +338,9 @@ class BufferPlanner:
         self.detour = None if detour is None else float(detour)
         self.spread_routes = spread_mode(spread_routes)
         self.second_opinion = second_opinion
+        self.max_leg = None if max_leg is None else float(max_leg)
+        #: the buffer's long legs by (d_max, max_leg), shared by the planners with_options makes
+        self._long_legs: Dict[Tuple[float, float], np.ndarray] = {}
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
@@ -405,7 +375,8 @@ class BufferPlanner:
             repair_expansions_per_agent=self.repair_expansions_per_agent, time_limit=self.time_limit,
             stepper_expansions_per_agent=self.stepper_expansions_per_agent, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
-            max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour, spread_routes=self.spread_routes)
+            max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour, spread_routes=self.spread_routes,
+            max_leg=self.max_leg)
 
     def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
         """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
@@ -422,7 +393,10 @@ class BufferPlanner:
     def with_options(self, **kwargs) -> "BufferPlanner":
         """A planner over the same nodes and matrices with some options changed (e.g. ``c_max``)."""
         kwargs.setdefault("second_opinion", self.second_opinion)
-        return BufferPlanner(self.observations, self.D, self.C, self.pairwise, **{**self.options(), **kwargs})
+        out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, **{**self.options(), **kwargs})
+        if out.second_opinion is self.second_opinion:
+            out._long_legs = self._long_legs
+        return out
 
     # ------------------------------------------------------------------ problem graph
     def problem_graph(self, starts: np.ndarray, goals: np.ndarray, exclude: Optional[Sequence[int]] = None,
@@ -452,7 +426,19 @@ class BufferPlanner:
                                    max_edges=self.max_edges, avoid=avoid, avoid_slack=self.proximity_radius or 0.0,
                                    cost_guard=self.cost_guard, detour=self.detour,
                                    second_opinion=self.second_opinion, detached=detached,
-                                   goal_detached=goal_detached, attached=self._attached[1], passing=passing)
+                                   goal_detached=goal_detached, attached=self._attached[1], passing=passing,
+                                   max_leg=self.max_leg, long_buffer_legs=self._long_buffer_legs())
+
+    def _long_buffer_legs(self) -> Optional[np.ndarray]:
+        """The edges between buffer nodes that ``second_opinion`` reads beyond ``max_leg`` (read once)."""
+        if self.max_leg is None or self.second_opinion is None:
+            return None
+        key = (self.d_max, self.max_leg)
+        if key not in self._long_legs:
+            n = len(self.observations)
+            self._long_legs[key] = long_legs(self.D, self.observations, n, self.d_max, self.second_opinion,
+                                             self.max_leg)
+        return self._long_legs[key]
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,
@@ -596,5 +582,4 @@ class BufferPlanner:
         return WaypointGraph(dist, cost, graph.observations, graph.d_max, graph.c_max)
 
 
-__all__ = ["AUTO_SEARCH_AGENTS", "BufferPlanner", "MultiAgentPlan", "PairwiseFn", "SOLVERS", "direct_plans",
-           "waypoints_from_paths"]
+__all__ = ["AUTO_SEARCH_AGENTS", "BufferPlanner", "MultiAgentPlan", "PairwiseFn", "SOLVERS"]

@@ -48,10 +48,11 @@ from .models import (
     env_observations,
     policy_fn,
 )
-from .planner import BufferPlanner, MultiAgentPlan, direct_plans
+from .planner import BufferPlanner, MultiAgentPlan
 from .repair import EdgeMemory
 from .replanning import StuckReplanning
 from .stats import ControllerStats
+from .waypoints import direct_plans
 
 
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
@@ -303,6 +304,8 @@ class SearchPolicy(StuckReplanning):
         if memory.n_nodes != len(obs):
             raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
         planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
+        if planner_options["second_opinion"] is None:
+            saved.pop("max_leg", None)  # nothing to read legs with
         planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), **{**saved, **planner_options})
         kwargs.setdefault("memory", memory)
         return cls(planner, driver if driver is not None else critic, **kwargs)

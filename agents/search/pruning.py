@@ -4,7 +4,9 @@
 - :func:`relax_cost_locally`: an agent that the cut-off leaves without a path gets the edges
   around its start and goal back, at a doubling cut-off, until it has one;
 - :func:`admit_cheaper_routes`: an agent that the cut-off sends the long way round, at a far
-  higher predicted cost, gets its plain shortest route back where :func:`trusted_edges` trusts it.
+  higher predicted cost, gets its plain shortest route back where :func:`trusted_edges` trusts it;
+- :func:`long_legs`: the edges a second critic (the driver's) reads as too long to drive, which
+  neither the cut-off nor its relaxation may admit.
 """
 from __future__ import annotations
 
@@ -20,6 +22,33 @@ _MIN_DISTANCE = 1e-9
 
 #: ``confirm(u, v) -> distances``: a second critic's predicted steps along the edges ``u[i] -> v[i]`` (node ids)
 ConfirmFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def read_pairs(read: ConfirmFn, observations: np.ndarray, pairs: np.ndarray, batch: int = 4096) -> np.ndarray:
+    """``read(observations[u], observations[v])`` for each node pair ``(u, v)`` of ``pairs`` (``(E, 2)``)."""
+    out = [np.asarray(read(observations[pairs[s:s + batch, 0]], observations[pairs[s:s + batch, 1]]),
+                      dtype=np.float64).reshape(-1) for s in range(0, len(pairs), batch)]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def long_legs(D: np.ndarray, observations: np.ndarray, n_buffer: int, d_max: float, read: ConfirmFn,
+              max_leg: float, buffer_long: Optional[np.ndarray] = None) -> np.ndarray:
+    """The admissible edges (:func:`admissible`) that ``read`` (a second critic: the driver's) puts
+    beyond ``max_leg`` steps, as ``(E, 2)`` node pairs.
+
+    A driver that reads a leg that long hands it to its fallback policy at once (the controller's
+    ``fallback_beyond``), so a plan that holds it drives it the costly way. ``buffer_long``: those
+    between buffer nodes, where the caller has them (they are read once per graph: about 8 s for
+    Apartment3's 61,245 edges on one core); then only the edges of the starts and goals are read.
+    """
+    pairs = admissible(D, n_buffer, d_max)
+    if buffer_long is not None:
+        pairs[:n_buffer, :n_buffer] = False
+    pairs = np.argwhere(pairs)
+    found = pairs[read_pairs(read, observations, pairs) > max_leg]
+    if buffer_long is None:
+        return found.astype(np.int64)
+    return np.concatenate([np.asarray(buffer_long, dtype=np.int64).reshape(-1, 2), found]).astype(np.int64)
 
 
 def admissible(D: np.ndarray, n_buffer: int, d_max: float, exclude: Optional[np.ndarray] = None,
@@ -184,5 +213,5 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
             keep[short & (C < c) & bwd[i][None, :]] = True
 
 
-__all__ = ["ConfirmFn", "admissible", "admit_cheaper_routes", "relax_cost_locally", "route_from_predecessors",
-           "shortest_routes", "trusted_edges"]
+__all__ = ["ConfirmFn", "admissible", "admit_cheaper_routes", "long_legs", "read_pairs",
+           "relax_cost_locally", "route_from_predecessors", "shortest_routes", "trusted_edges"]

@@ -81,6 +81,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the search methods' plans prefer, of routes equal in cost and conflicts, those through "
                         "fewer nodes of other routes ('routes') or also near them ('near'); BufferPlanner's "
                         "spread_routes; default: the planner's ('off')")
+    p.add_argument("--max-leg", type=float, default=None, metavar="STEPS",
+                   help="the search methods' plans take no leg that the constrained agent's critic reads beyond "
+                        "STEPS (BufferPlanner's max_leg; 14 is where --fallback hands a panorama leg over at "
+                        "once; default: off)")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -218,6 +222,8 @@ def run(args: argparse.Namespace) -> int:
     if args.repair_problems and repair_seed == args.seed:
         raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "
                          "problems")
+    if args.max_leg is not None and not args.max_leg > 0:
+        raise ValueError(f"--max-leg must be > 0 steps, got {args.max_leg}")
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
                          "test problems")
@@ -270,12 +276,17 @@ def run(args: argparse.Namespace) -> int:
         methods = [m.with_options(repair_routes=True) if m.search else m for m in methods]
     if args.spread_routes is not None:
         methods = [m.with_options(spread_routes=args.spread_routes) if m.search else m for m in methods]
+    if args.max_leg is not None:
+        methods = [m.with_options(max_leg=args.max_leg) if m.search else m for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
+    from agents.search.models import default_second_opinion
 
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
     models.update(marl)
+    if args.max_leg is not None and default_second_opinion(models["unconstrained"], models["constrained"]) is None:
+        raise ValueError("--max-leg needs a constrained agent with a distance critic of its own to read the legs with")
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
                                   sparsify=args.sparsify, max_edges=args.max_edges)
     progress = show_progress(args.no_progress or args.json)
@@ -329,6 +340,9 @@ def run(args: argparse.Namespace) -> int:
                    "around it first\n\n")
     if args.spread_routes is not None:
         header += f"--spread-routes {args.spread_routes}: the search methods' plans spread routes that way\n\n"
+    if args.max_leg is not None:
+        header += (f"--max-leg {args.max_leg:g}: the search methods' plans take no leg the constrained agent's "
+                   "critic reads beyond that many steps\n\n")
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
@@ -411,7 +425,7 @@ def _run_paper(args: argparse.Namespace) -> int:
                              "0.1 .. 1, chosen per cell on the test problems)")
     for flag, value in (("--hold", args.hold), ("--repair-problems", args.repair_problems or None),
                         ("--sparsify", args.sparsify), ("--max-edges", args.max_edges),
-                        ("--spread-routes", args.spread_routes)):
+                        ("--spread-routes", args.spread_routes), ("--max-leg", args.max_leg)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
                              "open loop)")

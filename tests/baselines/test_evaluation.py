@@ -274,8 +274,8 @@ def test_c_max_from_an_earlier_validation_is_checked_before_any_work(tmp_path, c
 
 
 def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_path, capsys, monkeypatch):
-    """``--fallback`` reaches the constrained searches, ``--repair-routes`` and ``--spread-routes`` every
-    search method (the latter its planner)."""
+    """``--fallback`` reaches the constrained searches, ``--repair-routes``, ``--spread-routes`` and
+    ``--max-leg`` every search method (the latter two its planner)."""
     import baselines.evaluation as ev
     import baselines.methods as bm
     from baselines.cli import main
@@ -291,23 +291,31 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
     planners = []
 
     def policy_spy(planner, *args, **kwargs):
-        planners.append(None if planner is None else planner.spread_routes)
+        planners.append(None if planner is None else (planner.spread_routes, planner.max_leg))
         return real_policy(planner, *args, **kwargs)
 
     monkeypatch.setattr(ev, "execute", spy)
     monkeypatch.setattr(bm, "SearchPolicy", policy_spy)
     code = main(["evaluate", "--agents", "1", "--problems", "1", "--difficulty", "easy", "--methods", "sorb",
                  "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--json", "--fallback",
-                 "--repair-routes", "--spread-routes", "routes", "--out", str(tmp_path)])
+                 "--repair-routes", "--spread-routes", "routes", "--max-leg", "14", "--out", str(tmp_path)])
     assert code == 0
     assert seen == {"sorb": (None, True, "routes"), "constrained_policy": (None, False, None),
                     "ours": ("unconstrained", True, "routes")}
-    assert sorted(planners, key=str) == [None, "routes", "routes"]  # the plain policy has no planner
+    # the plain policy has no planner
+    assert sorted(planners, key=str) == [("routes", 14.0), ("routes", 14.0), None]
     table = (tmp_path / "table.md").read_text()
     assert "--fallback: the constrained searches" in table and "--repair-routes: an agent" in table
-    assert "--spread-routes routes:" in table
+    assert "--spread-routes routes:" in table and "--max-leg 14: the search methods' plans" in table
     capsys.readouterr()
-    for argv in (["--fallback"], ["--repair-routes"], ["--spread-routes", "near"]):
+    assert main(["evaluate", "--max-leg", "0", "--out", str(tmp_path / "z")]) == 2
+    assert "--max-leg must be > 0" in capsys.readouterr().err and not (tmp_path / "z").exists()
+    import agents
+    one = agents.load_pretrained("SafeCentralObstacle-v0", kind="constrained")
+    monkeypatch.setattr(agents, "load_pretrained", lambda *a, **k: one)  # no second critic to read legs with
+    assert main(["evaluate", "--max-leg", "14", "--out", str(tmp_path / "y")]) == 2
+    assert "--max-leg needs a constrained agent" in capsys.readouterr().err
+    for argv in (["--fallback"], ["--repair-routes"], ["--spread-routes", "near"], ["--max-leg", "14"]):
         assert main(["evaluate", "--protocol", "paper", "--env", "SafeCenterDot-v0", *argv,
                      "--out", str(tmp_path / "p")]) == 2
         assert f"{argv[0]} does not apply" in capsys.readouterr().err

@@ -4,7 +4,8 @@ import pytest
 
 from agents.search.controller import AgentPlan
 from agents.search.mapf import Proximity, validate
-from agents.search.planner import BufferPlanner, direct_plans, waypoints_from_paths
+from agents.search.planner import BufferPlanner
+from agents.search.waypoints import direct_plans, waypoints_from_paths
 
 
 def euclid_pairwise(hot=None, hot_radius=0.0, hot_cost=10.0):
