@@ -541,7 +541,7 @@ def build_problem_graph(
     if attached is None:
         attached = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
     D2, C2, obs = attached
-    if max_leg is not None:
+    if max_leg is not None and math.isfinite(max_leg):
         if second_opinion is None:
             raise ValueError("max_leg needs a second_opinion to read the legs with")
         ee = np.concatenate([ee, long_legs(D2, obs, n, d_max, second_opinion, max_leg, long_buffer_legs)])

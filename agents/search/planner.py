@@ -244,10 +244,10 @@ class BufferPlanner:
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
             (:func:`~agents.search.pruning.trusted_edges`; ``None``: none). Not saved with the options.
         max_leg: no edge that ``second_opinion`` reads beyond this many steps is planned, nor admitted past the cost
-            cut-off (:func:`~agents.search.pruning.long_legs`; needs ``second_opinion``); e.g. the controller's
-            ``fallback_beyond``, where the second opinion is the driver's critic: such a leg would go to the
-            fallback policy at once. ``None``: off (the default; on panoramas it did not lower the cost, see the
-            Planning page of the docs).
+            cut-off (:func:`~agents.search.pruning.long_legs`; needs ``second_opinion``; ``None`` or ``inf``: off). A
+            :class:`~agents.search.policy.SearchPolicy` with a fallback sets it to the controller's
+            ``fallback_beyond`` where the second opinion is the driver's critic (such a leg would go to the
+            fallback policy at once), unless it is set.
     """
 
     def __init__(
@@ -321,7 +321,7 @@ class BufferPlanner:
                 raise ValueError(f"{name} must be >= 1 or None, got {factor!r}")
         if max_edges is not None and int(max_edges) < 1:
             raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
-        if max_leg is not None and not (max_leg > 0 and second_opinion is not None):
+        if max_leg is not None and not (max_leg > 0 and (second_opinion is not None or max_leg == math.inf)):
             raise ValueError(f"max_leg must be > 0 and needs a second_opinion to read legs with, got {max_leg!r}")
         self.solver = solver
         limits = (expansion_limit, prioritized_expansions_per_agent, repair_expansions_per_agent,
@@ -431,7 +431,7 @@ class BufferPlanner:
 
     def _long_buffer_legs(self) -> Optional[np.ndarray]:
         """The edges between buffer nodes that ``second_opinion`` reads beyond ``max_leg`` (read once)."""
-        if self.max_leg is None or self.second_opinion is None:
+        if self.max_leg is None or not math.isfinite(self.max_leg) or self.second_opinion is None:
             return None
         key = (self.d_max, self.max_leg)
         if key not in self._long_legs:

@@ -136,7 +136,10 @@ class SearchPolicy(StuckReplanning):
         deterministic: drive with the deterministic policy (default).
         fallback_model: optional second checkpoint that drives an agent's leg once the policy
             model is stuck on it (e.g. the unconstrained agent behind a constrained one that
-            will not approach a goal beside furniture); see :class:`WaypointController`.
+            will not approach a goal beside furniture); see :class:`WaypointController`. Where the
+            controller hands the legs its driver reads beyond ``fallback_beyond`` to it at once and
+            the planner's ``second_opinion`` is the driver's critic, the planner plans no such leg (its
+            ``max_leg``, unless set; ``inf`` keeps them).
         controller_kwargs: more options of :class:`WaypointController` (``stuck_window``,
             ``escape_steps``, ...), over :func:`default_controller_options` of the judging model.
         memory: the :class:`~agents.search.repair.EdgeMemory` of the graph (default: a new, empty
@@ -205,6 +208,10 @@ class SearchPolicy(StuckReplanning):
         self.seed = seed
         self.deterministic = bool(deterministic)
         self.controller_kwargs = {**default_controller_options(judge), **(controller_kwargs or {})}
+        beyond = self.controller_kwargs.get("fallback_beyond")
+        if (planner is not None and fallback_model is not None and beyond is not None and planner.max_leg is None
+                and getattr(planner.second_opinion, "model", None) is judge):
+            self.planner = planner.with_options(max_leg=beyond)  # such a leg would go to the fallback at once
         self.fallback_model = fallback_model
         self._policy = policy_fn(policy_model, deterministic=self.deterministic)
         self._fallback = None if fallback_model is None else policy_fn(fallback_model, deterministic=self.deterministic)

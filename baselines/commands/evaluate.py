@@ -83,8 +83,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "spread_routes; default: the planner's ('off')")
     p.add_argument("--max-leg", type=float, default=None, metavar="STEPS",
                    help="the search methods' plans take no leg that the constrained agent's critic reads beyond "
-                        "STEPS (BufferPlanner's max_leg; 14 is where --fallback hands a panorama leg over at "
-                        "once; default: off)")
+                        "STEPS (BufferPlanner's max_leg; 'inf': any leg; default: with --fallback, the constrained "
+                        "searches of panorama agents take none beyond 14, where the leg would go to the fallback "
+                        "at once; otherwise any)")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -222,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
     if args.repair_problems and repair_seed == args.seed:
         raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "
                          "problems")
-    if args.max_leg is not None and not args.max_leg > 0:
+    if args.max_leg is not None and not args.max_leg > 0:  # NaN too
         raise ValueError(f"--max-leg must be > 0 steps, got {args.max_leg}")
     if args.c_max == "auto" and args.validation_seed == args.seed:
         raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
@@ -285,7 +286,8 @@ def run(args: argparse.Namespace) -> int:
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
               for k in ("unconstrained", "constrained")}
     models.update(marl)
-    if args.max_leg is not None and default_second_opinion(models["unconstrained"], models["constrained"]) is None:
+    if args.max_leg is not None and math.isfinite(args.max_leg) and default_second_opinion(
+            models["unconstrained"], models["constrained"]) is None:
         raise ValueError("--max-leg needs a constrained agent with a distance critic of its own to read the legs with")
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
                                   sparsify=args.sparsify, max_edges=args.max_edges)

@@ -123,3 +123,28 @@ def test_a_saved_policy_keeps_max_leg_where_it_can_read_legs(two_agents, tmp_pat
     path = policy.save(tmp_path / "graph")
     assert SearchPolicy.load(path, critic, driver).planner.max_leg == 6.0
     assert SearchPolicy.load(path, critic).planner.max_leg is None  # nothing to read legs with
+
+
+def test_a_search_policy_with_a_fallback_plans_no_leg_it_would_hand_over(two_agents):
+    critic, driver, nodes = two_agents
+    beyond = {"fallback_beyond": 6.0}
+    policy = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
+                                      controller_kwargs=beyond)
+    assert policy.planner.second_opinion.model is driver and policy.planner.max_leg == 6.0
+    # no fallback, no hand-over, a second opinion that is not the driver's, or max_leg set: left as it is
+    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, controller_kwargs=beyond).planner.max_leg is None
+    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
+                                    controller_kwargs={"fallback_beyond": None}).planner.max_leg is None
+    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic, controller_kwargs=beyond,
+                                    second_opinion=SecondOpinion(critic)).planner.max_leg is None
+    kept = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
+                                    controller_kwargs=beyond, max_leg=float("inf"))
+    assert kept.planner.max_leg == float("inf")
+
+
+def test_an_infinite_max_leg_reads_nothing():
+    D, C = pairwise(ZIGZAG, ZIGZAG)
+    reader = Reader()
+    plan = BufferPlanner(ZIGZAG, D, C, pairwise, d_max=2.5, second_opinion=reader, max_leg=np.inf).plan(START, GOAL)
+    assert plan.solved and hops(plan).max() > 1.8 and reader.read == 0
+    assert BufferPlanner(ZIGZAG, D, C, pairwise, max_leg=np.inf).max_leg == np.inf  # needs no reader
