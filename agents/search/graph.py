@@ -493,7 +493,7 @@ def build_problem_graph(
     detour: Optional[float] = None, second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
     attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
-    max_leg: Optional[float] = None, long_buffer_legs: Optional[np.ndarray] = None,
+    max_leg: Optional[float] = None, long_edges: Optional[np.ndarray] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
@@ -518,8 +518,9 @@ def build_problem_graph(
     still pass them. ``attached``: what :func:`attach_endpoints` returns for these starts and goals,
     where it was computed before (it is the expensive step: the critic scores every new pair), and
     ``passing`` what :func:`passing_edges` returns for them and ``avoid``. ``max_leg``: no edge that
-    ``second_opinion`` reads beyond this many steps is admitted (:func:`~agents.search.pruning.long_legs`;
-    ``long_buffer_legs``: those between buffer nodes, where the caller has them).
+    ``second_opinion`` reads beyond this many steps is admitted; ``long_edges``: what
+    :func:`~agents.search.pruning.long_legs` returns for these endpoints and ``max_leg``, where
+    computed before (it reads every edge with the second critic).
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -544,7 +545,9 @@ def build_problem_graph(
     if max_leg is not None and math.isfinite(max_leg):
         if second_opinion is None:
             raise ValueError("max_leg needs a second_opinion to read the legs with")
-        ee = np.concatenate([ee, long_legs(D2, obs, n, d_max, second_opinion, max_leg, long_buffer_legs)])
+        if long_edges is None:
+            long_edges = long_legs(D2, obs, n, d_max, second_opinion, max_leg)
+        ee = np.concatenate([ee, long_edges])
     keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
     keep[ex, :] = False
     keep[:, ex] = False

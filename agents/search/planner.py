@@ -341,6 +341,8 @@ class BufferPlanner:
         self.max_leg = None if max_leg is None else float(max_leg)
         #: the buffer's long legs by (d_max, max_leg), shared by the planners with_options makes
         self._long_legs: Dict[Tuple[float, float], np.ndarray] = {}
+        #: the long legs of the last endpoints attached (the buffer's and theirs)
+        self._long: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
         self._buffer_graph: Optional[WaypointGraph] = None
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
@@ -427,18 +429,23 @@ class BufferPlanner:
                                    cost_guard=self.cost_guard, detour=self.detour,
                                    second_opinion=self.second_opinion, detached=detached,
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing,
-                                   max_leg=self.max_leg, long_buffer_legs=self._long_buffer_legs())
+                                   max_leg=self.max_leg, long_edges=self._long_edges(key))
 
-    def _long_buffer_legs(self) -> Optional[np.ndarray]:
-        """The edges between buffer nodes that ``second_opinion`` reads beyond ``max_leg`` (read once)."""
-        if self.max_leg is None or not math.isfinite(self.max_leg) or self.second_opinion is None:
+    def _long_edges(self, key: Tuple[Any, ...]) -> Optional[np.ndarray]:
+        """The edges of the attached problem (``key``: its endpoints) that ``second_opinion`` reads beyond
+        ``max_leg``: the buffer's are read once per graph, the endpoints' once per endpoints."""
+        if self.max_leg is None or not math.isfinite(self.max_leg):
             return None
-        key = (self.d_max, self.max_leg)
-        if key not in self._long_legs:
-            n = len(self.observations)
-            self._long_legs[key] = long_legs(self.D, self.observations, n, self.d_max, self.second_opinion,
-                                             self.max_leg)
-        return self._long_legs[key]
+        read, n = self.second_opinion, len(self.observations)
+        assert read is not None and self._attached is not None  # checked in __init__; attached by the caller
+        if (self.d_max, self.max_leg) not in self._long_legs:
+            self._long_legs[(self.d_max, self.max_leg)] = long_legs(self.D, self.observations, n, self.d_max, read,
+                                                                     self.max_leg)
+        if self._long is None or self._long[0] != key:
+            D2, _, obs = self._attached[1]
+            self._long = (key, long_legs(D2, obs, n, self.d_max, read, self.max_leg,
+                                         self._long_legs[(self.d_max, self.max_leg)]))
+        return self._long[1]
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,
              exclude: Optional[Sequence[int]] = None, exclude_edges: Optional[np.ndarray] = None,

@@ -88,6 +88,11 @@ def test_the_buffer_is_read_once_for_the_planners_with_options_makes():
     b.plan(START + 0.1, GOAL)
     buffer_pairs = int(admissible(D, 5, 2.5).sum())
     assert reader.read - first < first - buffer_pairs + 1  # only the new start's and goal's edges
+    # graphs tried again for the same endpoints (a replan's) read nothing more
+    reads = reader.read
+    b.problem_graph(START + 0.1, GOAL)
+    b.problem_graph(START + 0.1, GOAL, exclude=[2])
+    assert reader.read == reads
     # another second opinion reads the buffer itself
     other = Reader()
     base.with_options(max_leg=10.0, second_opinion=other).plan(START, GOAL)
