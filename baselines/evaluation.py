@@ -186,8 +186,8 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
-              "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max", "failures",
-              "cost_split")
+              "safety_rate", "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max",
+              "failures", "cost_split")
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
@@ -221,7 +221,8 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
     row = {
         "method": method.name, "agents": problem.n_agents, "difficulty": problem.difficulty,
         "problem": problem.index, "success": ex.success, "cost_max": float(ex.cost.max()),
-        "cost_mean": float(ex.cost.mean()), "collisions": ex.collisions, "steps": ex.steps,
+        "cost_mean": float(ex.cost.mean()), "collisions": ex.collisions, "safety_rate": ex.safety_rate,
+        "steps": ex.steps,
         "planning_time": ex.planning_time, "plan_status": ex.plan_status, "reached": int(ex.reached.sum()),
         **mapf_metrics(ex.arrival, ex.steps),
         "c_max": method.c_max if method.search else math.inf, "failures": failures_field(ex.failures),
@@ -469,7 +470,9 @@ def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
     median of the largest cumulative cost over them (``cost_median``); and, over all runs as the
     MAPF learning community reports them (:func:`mapf_metrics`), ``csr`` (the share of runs in
     which every agent arrived: the success rate), ``isr`` (the mean share of agents arrived),
-    ``soc_mean`` and ``makespan_mean`` (``nan`` where the rows lack them)."""
+    ``soc_mean`` and ``makespan_mean``; and the safety figures over all runs, ``safety_rate`` (the
+    mean share of agents that never touched another agent) and ``contacts`` (the mean number of
+    contacts between agents per run) (``nan`` where the rows lack them)."""
     groups: Dict[tuple, List[Dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["agents"]), r["difficulty"]), []).append(r)
@@ -487,7 +490,8 @@ def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
         # robust to the few runs in which an agent stalls for a long time
         agg["cost_median"] = float(np.median([float(r["cost_max"]) for r in ok])) if ok else math.nan
         agg["csr"] = agg["success_rate"]
-        for key, name in (("isr", "isr"), ("soc", "soc_mean"), ("makespan", "makespan_mean")):
+        for key, name in (("isr", "isr"), ("soc", "soc_mean"), ("makespan", "makespan_mean"),
+                          ("safety_rate", "safety_rate"), ("collisions", "contacts")):
             vals = [float(r[key]) for r in rs if r.get(key) not in (None, "")]
             agg[name] = float(np.mean(vals)) if len(vals) == len(rs) else math.nan
         out.append(agg)
@@ -502,8 +506,10 @@ def markdown_table(agg: Sequence[Dict[str, Any]], methods: Optional[Sequence[str
                    value: str = "cost", bold_min_success: float = 0.9) -> str:
     """The paper's Table I layout: rows (difficulty, agents), one column per method.
 
-    Cells read ``mean ± std (success%)`` of the largest cumulative cost over agents
-    (``value="cost"``) or of another aggregated quantity (e.g. ``"mean_cost"``). In each row
+    Cells read ``mean ± std (success%; safe rate%)`` of the largest cumulative cost over agents
+    (``value="cost"``) or of another aggregated quantity (e.g. ``"mean_cost"``); the safety rate
+    (the mean share of agents that never touched another agent) is shown for multi-agent cells
+    whose rows record it. In each row
     the lowest mean among the methods with a success rate of at least ``bold_min_success``
     is bold (a method that rarely arrives would otherwise win by its few easy successes).
     """
@@ -526,11 +532,18 @@ def markdown_table(agg: Sequence[Dict[str, Any]], methods: Optional[Sequence[str
                 parts.append("n/a")
                 continue
             txt = (f"{v[f'{value}_mean']:.2f} ± {v[f'{value}_std']:.2f}" if math.isfinite(mu) else "-")
-            txt += f" ({100 * v['success_rate']:.0f}%)"
+            safe = v.get("safety_rate", math.nan)
+            shown = k > 1 and isinstance(safe, float) and math.isfinite(safe)
+            txt += f" ({100 * v['success_rate']:.0f}%" + (f"; safe {_percent(safe)})" if shown else ")")
             win = math.isfinite(mu) and mu == best and v["success_rate"] >= bold_min_success
             parts.append(f"**{txt}**" if win and len(methods) > 1 else txt)
         lines.append(f"| {d.capitalize()} | {k} | " + " | ".join(parts) + " |")
     return "\n".join(lines)
+
+
+def _percent(x: float) -> str:
+    """A share as a percentage with one decimal below 100 (``99.5%``) and none at 100."""
+    return "100%" if x >= 1.0 else f"{100 * x:.1f}%"
 
 
 def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:

@@ -36,6 +36,14 @@ class Execution:
     #: per agent and activity (:data:`~agents.search.stats.ACTIVITIES`), the cost it took
     #: doing that (rows sum to ``cost``; empty where the runner does not record it)
     cost_split: np.ndarray = field(default_factory=lambda: np.zeros((0, len(ACTIVITIES))))
+    #: per agent, whether it touched another agent during the run (empty where agents pass
+    #: through each other)
+    touched: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    @property
+    def safety_rate(self) -> float:
+        """The share of agents that never touched another agent (``nan`` where not recorded)."""
+        return float(1.0 - self.touched.mean()) if len(self.touched) else math.nan
 
 
 def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np.ndarray, parked_at: np.ndarray,
@@ -57,6 +65,25 @@ def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np
     return now
 
 
+class Contacts:
+    """Contacts between agents over a run: each counted once, when it begins (:attr:`count`), and per
+    agent whether it touched another (:attr:`touched`)."""
+
+    def __init__(self, index: Dict[str, int]) -> None:
+        self.index = index
+        self.count = 0
+        self.touched = np.zeros(len(index), dtype=bool)
+        self._under_way: set = set()
+
+    def update(self, now: set) -> None:
+        """Take one step's contacts under way (pairs of agent names, as :func:`tally_step` returns)."""
+        self.count += len(now - self._under_way)
+        self._under_way = now
+        for pair in now:
+            for a in pair:
+                self.touched[self.index[a]] = True
+
+
 def geodesic_of(env) -> Any:
     """``geodesic(a, b) -> float`` on ``env``'s map (ground truth; ``nan`` where a point is not free)."""
 
@@ -69,4 +96,4 @@ def geodesic_of(env) -> Any:
     return geodesic
 
 
-__all__ = ["Execution", "geodesic_of", "tally_step"]
+__all__ = ["Contacts", "Execution", "geodesic_of", "tally_step"]

@@ -35,7 +35,7 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
     ``count_start_cost``: add the start state's cost of a lone agent (the paper protocol's convention).
     """
     from .anatomy import FailureTracker
-    from .execution import Execution, geodesic_of, tally_step
+    from .execution import Contacts, Execution, geodesic_of, tally_step
 
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
@@ -46,7 +46,7 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
         cost[0] += float(infos[names[0]].get("obstacle_cost", infos[names[0]]["cost"]))
     reached = np.zeros(k, dtype=bool)
     parked_at = np.full(k, -1)
-    collisions, touching = 0, set()
+    contacts = Contacts(index)
     traj = [env.positions]
     step_length = float(getattr(env, "action_scale", 1.0))
     tracker = FailureTracker(names, step_length, touch=2.0 * env.scenario.agent_radius + 0.5 * step_length)
@@ -56,16 +56,14 @@ def execute_marl(env, agent, starts: np.ndarray, goals: np.ndarray, seed: int = 
         steps += 1
         traj.append(env.positions)
         tracker.step({}, infos, env.agents)
-        now = tally_step(infos, term, index, cost, reached, parked_at, steps)
-        collisions += len(now - touching)  # a contact counts once, when it begins
-        touching = now
+        contacts.update(tally_step(infos, term, index, cost, reached, parked_at, steps))
     trajectories = np.stack(traj)
     failures = []
     if not reached.all():
         failures = tracker.diagnose(trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at,
                                     geodesic_of(env), planned=False)
-    return Execution(bool(reached.all()), reached, cost, steps, collisions, 0.0, "direct", trajectories,
-                     {"algo": agent.algo}, failures, parked_at)
+    return Execution(bool(reached.all()), reached, cost, steps, contacts.count, 0.0, "direct", trajectories,
+                     {"algo": agent.algo}, failures, parked_at, touched=contacts.touched)
 
 
 __all__ = ["MARL_ALGOS", "execute_marl", "load_marl_models"]

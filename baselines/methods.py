@@ -29,10 +29,11 @@ import numpy as np
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
+from agents.search.safety import SafetyLayer, team_positions
 from agents.search.stats import ACTIVITIES
 
 from .anatomy import AgentFailure, FailureTracker
-from .execution import Execution, geodesic_of, tally_step
+from .execution import Contacts, Execution, geodesic_of, tally_step
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class Method:
             :class:`~agents.search.planner.BufferPlanner`); ``None``: the planner's own.
         max_leg: the planner's ``max_leg`` (no leg its second critic reads beyond this many steps);
             ``None``: the planner's own.
+        safety: run with the :class:`~agents.search.safety.SafetyLayer` of the env between the
+            controller and the env (the agents share their positions within the team).
     """
 
     name: str
@@ -72,6 +75,7 @@ class Method:
     repair_routes: bool = False
     spread_routes: Optional[str] = None
     max_leg: Optional[float] = None
+    safety: bool = True
 
     def with_options(self, **kwargs) -> "Method":
         return replace(self, **kwargs)
@@ -164,16 +168,17 @@ def execute(
         if method.max_leg not in (None, planner.max_leg):
             changes["max_leg"] = method.max_leg
         planner_m = planner.with_options(**changes) if changes else planner
+    safety = SafetyLayer.for_env(env) if method.safety and getattr(env, "agent_collisions", True) else None
     policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
                           reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
                           seed=seed, fallback_model=models[method.fallback] if method.fallback else None,
-                          memory=memory if method.search else None, repair_routes=method.repair_routes)
+                          memory=memory if method.search else None, repair_routes=method.repair_routes,
+                          safety=safety)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)
     reached = np.zeros(k, dtype=bool)
-    collisions = 0
-    touching: set = set()
+    contacts = Contacts(index)
     traj = [env.positions]
     steps = 0
     step_length = float(getattr(env, "action_scale", 1.0))
@@ -181,15 +186,14 @@ def execute(
     parked_at = np.full(k, -1)
     split = np.zeros((k, len(ACTIVITIES)))
     while env.agents:
-        actions, _ = policy.predict({a: obs[a] for a in env.agents})
+        team = team_positions(env) if safety is not None else None
+        actions, _ = policy.predict({a: obs[a] for a in env.agents}, positions=team)
         activity = dict(policy.stats.activity)
         obs, _, term, trunc, infos = env.step(actions)
         steps += 1
         traj.append(env.positions)
         tracker.step(policy.stats.holding, infos, env.agents)
-        now = tally_step(infos, term, index, cost, reached, parked_at, steps, activity, split)
-        collisions += len(now - touching)  # a contact counts once, when it begins
-        touching = now
+        contacts.update(tally_step(infos, term, index, cost, reached, parked_at, steps, activity, split))
     plan = policy.current_plan
     extra: Dict[str, Any] = {}
     if plan is not None:
@@ -197,7 +201,8 @@ def execute(
                  "predicted_cost": plan.predicted_cost, "nodes": plan.nodes, "replan_time": policy.replan_time}
     stats = policy.stats
     extra.update(yields=stats.yields, waits=stats.waits, escapes=stats.escapes, skips=stats.skips,
-                 replans=stats.replans, route_repairs=policy.route_repairs)
+                 replans=stats.replans, route_repairs=policy.route_repairs,
+                 shield_steered=policy.safety_state.steered, shield_stopped=policy.safety_state.stopped)
     if method.search:
         extra["memory"] = policy.memory
     trajectories = np.stack(traj)
@@ -207,8 +212,9 @@ def execute(
             trajectories, np.asarray(goals, dtype=np.float64), reached, parked_at, geodesic_of(env),
             planned=plan is None or plan.solved, legs={a: policy.leg(a) for a in names},
             escapes=stats.leg_escapes, node_positions=node_positions)
-    return Execution(bool(reached.all()), reached, cost, steps, collisions, policy.planning_time,
-                     plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at, split)
+    return Execution(bool(reached.all()), reached, cost, steps, contacts.count, policy.planning_time,
+                     plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at, split,
+                     contacts.touched)
 
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "MARL_METHODS", "METHODS", "Method", "PAPER_METHODS",

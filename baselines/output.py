@@ -66,8 +66,8 @@ def figure_output_dir(args: argparse.Namespace, readme_dir: Path) -> Path:
 
 
 #: the per-run fields of ``runs.csv`` read as numbers
-NUMERIC_FIELDS = ("agents", "problem", "cost_max", "cost_mean", "collisions", "steps", "planning_time", "reached",
-                  "isr", "soc", "makespan", "c_max")
+NUMERIC_FIELDS = ("agents", "problem", "cost_max", "cost_mean", "collisions", "safety_rate", "steps", "planning_time",
+                  "reached", "isr", "soc", "makespan", "c_max")
 
 
 def read_rows(path: Union[str, os.PathLike]) -> List[Dict[str, Any]]:

@@ -14,6 +14,8 @@ without a critic.
   advance, planned departure times, yield rule);
 - :class:`SearchPolicy`: all of the above as one object with an SB3-style ``predict`` for a
   Gymnasium goal-conditioned observation or a PettingZoo parallel env's observations;
+- :class:`SafetyLayer`: the filter between the controller and the env that keeps agents from
+  touching each other, from the team's shared positions (:func:`team_positions`);
 - :func:`build_problem_graph`: the one pipeline from critic matrices to a problem's pruned graph
   (endpoint attachment, cost cut-off, local relaxation), used by the planner.
 """
@@ -23,11 +25,13 @@ from .mapf import CBSResult, CBSSolver, MapfInstance, Proximity, integer_duratio
 from .models import distance_fn, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
 from .policy import SearchPolicy
+from .safety import SafetyLayer, SafetyState, team_positions
 from .single import Plan, risk_bounded_path, shortest_path
 from .waypoints import direct_plans
 
 __all__ = [
     "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "ProblemGraph",
-    "Proximity", "SearchPolicy", "WaypointController", "WaypointGraph", "build_problem_graph", "direct_plans",
-    "distance_fn", "integer_durations", "policy_fn", "risk_bounded_path", "shortest_path", "solve_cbs", "validate",
+    "Proximity", "SafetyLayer", "SafetyState", "SearchPolicy", "WaypointController", "WaypointGraph",
+    "build_problem_graph", "direct_plans", "distance_fn", "integer_durations", "policy_fn", "risk_bounded_path",
+    "shortest_path", "solve_cbs", "team_positions", "validate",
 ]

@@ -254,6 +254,8 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         #: agent -> the agent it holds its parking for (goal order), as of its last check
         self._parks_after: Dict[str, str] = {}
         self._waiting: Dict[str, str] = {}
+        #: agents reported stuck from outside (a safety layer that kept them from moving), not yet handled
+        self._reported: set = set()
         for name, v in (("goal_clearance", goal_clearance), ("push_margin", push_margin)):
             if v is not None and not v > 0:
                 raise ValueError(f"{name} must be > 0 or None, got {v!r}")
@@ -393,6 +395,12 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         self.stats.waypoint_index = dict(self.index)
         return {a: actions[i] for i, a in enumerate(live)}
 
+    def report_stuck(self, agents) -> None:
+        """Count ``agents`` as stuck on their next step in which they are free to move (e.g. a safety
+        layer between the controller and the env has kept them from moving as asked): they escape,
+        and replan (or hand the leg over) as agents found stuck do."""
+        self._reported.update(a for a in agents if a in self.plans)
+
     def set_plan(self, agent: str, plan: AgentPlan) -> None:
         """Give ``agent`` a new plan from now on (it starts at the plan's first waypoint)."""
         self.set_plans({agent: plan})
@@ -464,6 +472,9 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         for i, a in enumerate(live):
             recent = self._recent[a]
             stalled = self._no_progress(a, to_target.get(a), bool(hold[i]))
+            if a in self._reported and self._escape[a] == 0:
+                self._reported.discard(a)
+                stalled = True
             if hold[i]:  # standing still on purpose is not being stuck
                 recent.clear()
                 continue

@@ -6,10 +6,10 @@ goal-conditioned policy that drives every agent from waypoint to waypoint
 (:class:`~agents.search.controller.WaypointController`). It is used like a Stable-Baselines3
 model::
 
-    policy = SearchPolicy.from_models(critic, driver, c_max=0.25)
+    policy = SearchPolicy.from_models(critic, driver, c_max=0.25, safety=SafetyLayer.for_env(env))
     obs, infos = env.reset(seed=0)                # a PettingZoo parallel env ...
     while env.agents:
-        actions, _ = policy.predict({a: obs[a] for a in env.agents})
+        actions, _ = policy.predict({a: obs[a] for a in env.agents}, positions=team_positions(env))
         obs, rewards, terminations, truncations, infos = env.step(actions)
 
 and just as well on a single Gymnasium goal-conditioned observation (``obs, info =
@@ -19,8 +19,9 @@ A new episode is recognised by :meth:`SearchPolicy.reset`, by ``episode_start``,
 goal or by an agent that was not there on the previous call; call :meth:`reset` when an episode
 repeats the previous one's problem exactly.
 
-Only observations enter: positions never do. This module does not import torch; the models
-are only called through ``predict``, ``distance`` and ``pairwise``.
+Only observations enter the planner and the controller; the optional
+:class:`~agents.search.safety.SafetyLayer` reads the team's shared positions. This module does not
+import torch; the models are only called through ``predict``, ``distance`` and ``pairwise``.
 """
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ from .models import (
 from .planner import BufferPlanner, MultiAgentPlan
 from .repair import EdgeMemory
 from .replanning import StuckReplanning
+from .safety import SafetyLayer, SafetyState
 from .stats import ControllerStats
 from .waypoints import direct_plans
 
@@ -146,6 +148,10 @@ class SearchPolicy(StuckReplanning):
             one): every plan leaves out the edges it removed, and it learns from every episode
             unless frozen (``memory.frozen = True``; an evaluation learns on validation problems
             and freezes it for the test problems). :meth:`save` keeps it with the graph.
+        safety: the :class:`~agents.search.safety.SafetyLayer` that filters every joint action so
+            that no two agents touch (e.g. ``SafetyLayer.for_env(env)``); it reads the team's shared
+            positions, which :meth:`predict` then needs (``positions=team_positions(env)``).
+            ``None``: actions go to the env as the controller makes them.
     """
 
     def __init__(
@@ -169,6 +175,7 @@ class SearchPolicy(StuckReplanning):
         fallback_model: Any = None,
         controller_kwargs: Optional[Dict[str, Any]] = None,
         memory: Optional[EdgeMemory] = None,
+        safety: Optional[SafetyLayer] = None,
     ) -> None:
         judge = distance_model if distance_model is not None else policy_model
         hold = default_hold(judge) if hold is None else hold
@@ -193,6 +200,9 @@ class SearchPolicy(StuckReplanning):
         self.hold = hold
         self.reach_threshold = float(reach_threshold)
         self.safety_radius = safety_radius
+        if safety is not None and not isinstance(safety, SafetyLayer):
+            raise TypeError(f"safety must be a SafetyLayer or None, got {type(safety).__name__}")
+        self.safety = safety
         self.replan_when_stuck = bool(replan_when_stuck)
         self.ban_radius = float(ban_radius)
         if not ban_detour >= 0:
@@ -355,6 +365,8 @@ class SearchPolicy(StuckReplanning):
         #: replans of the episode before a leg along an edge another agent failed on (``repair_routes``)
         self.route_repairs = 0
         self._leg_checked: Dict[str, Tuple[AgentPlan, int]] = {}
+        #: what the safety layer did in the episode
+        self.safety_state = SafetyState()
 
     @property
     def stats(self) -> ControllerStats:
@@ -391,6 +403,7 @@ class SearchPolicy(StuckReplanning):
         state: Any = None,
         episode_start: Optional[Union[bool, np.ndarray]] = None,
         deterministic: Optional[bool] = None,
+        positions: Optional[Mapping[str, Any]] = None,
     ) -> Tuple[Any, None]:
         """Actions for a goal-conditioned observation dict, or a dict agent -> observation dict.
 
@@ -400,6 +413,11 @@ class SearchPolicy(StuckReplanning):
         still has an observation but needs no action). ``state`` is ignored; a true
         ``episode_start`` starts a new episode. ``deterministic`` must agree with the one the
         policy was made with, if given.
+
+        ``positions``: the team's shared positions, agent name -> ``(x, y)`` in world units for
+        every agent of the team, parked ones too (:func:`~agents.search.safety.team_positions`);
+        required with a :attr:`safety` layer, which reads them to keep the agents apart, and
+        read by nothing else (the planner and the controller see observations only).
         """
         if deterministic is not None and bool(deterministic) != self.deterministic:
             raise ValueError(f"this SearchPolicy drives with deterministic={self.deterministic}; "
@@ -424,6 +442,17 @@ class SearchPolicy(StuckReplanning):
         if self.repair_routes and self.planner is not None and self.replan_when_stuck:
             self._repair_routes(current)
         actions = self.controller.act(current)
+        if self.safety is not None and not single:
+            if positions is None:
+                raise ValueError("this SearchPolicy has a safety layer: pass the team's positions, "
+                                 "predict(obs, positions=team_positions(env))")
+            actions = self.safety.filter_agents(actions, positions, self.safety_state)
+            blocked = [a for a in actions if self.safety_state.blocked.get(a, 0) >= self.safety.patience]
+            if blocked:  # the layer has kept them from moving as asked for a while: stuck, as far as the plan goes
+                self.controller.report_stuck(blocked)
+                self.safety_state.deadlocks += len(blocked)
+                for a in blocked:
+                    self.safety_state.blocked[a] = 0
         self._record_progress()
         if single:
             act = actions["agent_0"]

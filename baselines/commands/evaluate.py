@@ -86,6 +86,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "STEPS (BufferPlanner's max_leg; 'inf': any leg; default: with --fallback, the constrained "
                         "searches of panorama agents take none beyond 14, where the leg would go to the fallback "
                         "at once; otherwise any)")
+    p.add_argument("--safety", choices=("on", "off"), default=None,
+                   help="the safety layer between the controller and the env, which keeps agents from touching "
+                        "each other with the team's shared positions (agents.search.safety; default on; 'off' "
+                        "shows what the agents do without it)")
     p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
@@ -279,6 +283,8 @@ def run(args: argparse.Namespace) -> int:
         methods = [m.with_options(spread_routes=args.spread_routes) if m.search else m for m in methods]
     if args.max_leg is not None:
         methods = [m.with_options(max_leg=args.max_leg) if m.search else m for m in methods]
+    if args.safety == "off":
+        methods = [m.with_options(safety=False) for m in methods]
     t0 = time.perf_counter()
     from agents import load_pretrained
     from agents.search.models import default_second_opinion
@@ -330,7 +336,8 @@ def run(args: argparse.Namespace) -> int:
     table = markdown_table(agg, names)
     wall = time.perf_counter() - t0
     header = (f"{args.env}: largest cumulative cost over agents, mean ± std over successful runs "
-              f"(success rate); {args.problems} problems per cell, seed {args.seed}, {wall:.0f} s\n\n")
+              f"(success rate; safety rate: the share of agents that never touched another); {args.problems} "
+              f"problems per cell, seed {args.seed}, {wall:.0f} s\n\n")
     if chosen is not None:
         header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
@@ -345,6 +352,8 @@ def run(args: argparse.Namespace) -> int:
     if args.max_leg is not None:
         header += (f"--max-leg {args.max_leg:g}: the search methods' plans take no leg the constrained agent's "
                    "critic reads beyond that many steps\n\n")
+    if args.safety == "off":
+        header += "--safety off: no safety layer between the controller and the env\n\n"
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
@@ -427,7 +436,8 @@ def _run_paper(args: argparse.Namespace) -> int:
                              "0.1 .. 1, chosen per cell on the test problems)")
     for flag, value in (("--hold", args.hold), ("--repair-problems", args.repair_problems or None),
                         ("--sparsify", args.sparsify), ("--max-edges", args.max_edges),
-                        ("--spread-routes", args.spread_routes), ("--max-leg", args.max_leg)):
+                        ("--spread-routes", args.spread_routes), ("--max-leg", args.max_leg),
+                        ("--safety", args.safety)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
                              "open loop)")

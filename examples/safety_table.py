@@ -1,0 +1,48 @@
+"""The safety layer against no layer, count by count: arrivals, cost, contacts and the safety rate.
+
+Reads two folders of ``safe-mapf evaluate`` (one with the safety layer, one with ``--safety off``,
+the same problems) and prints a Markdown table: CSR (runs in which every agent arrived), ISR
+(agents that arrived), the mean largest cumulative cost over all runs, contacts per run, the
+safety rate (agents that never touched another) and the makespan.
+
+Run: ``python examples/safety_table.py results/safety_on results/safety_off``
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from baselines.output import read_rows
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("on", type=Path, help="evaluate folder with the safety layer")
+    p.add_argument("off", type=Path, help="evaluate folder with --safety off")
+    args = p.parse_args(argv)
+    folders = {"on": args.on, "off": args.off}
+    rows = {}
+    for name, folder in folders.items():
+        path = folder / "runs.csv"
+        if not path.is_file():
+            raise SystemExit(f"{path}: no such file (an output folder of safe-mapf evaluate?)")
+        rows[name] = read_rows(path)
+    print("| agents | layer | CSR | ISR | mean largest cost | contacts per run | safety rate | makespan |")
+    print("|---|---|---|---|---|---|---|---|")
+    for k in sorted({r["agents"] for r in rows["on"]}):
+        for name, runs in rows.items():
+            rs = [r for r in runs if r["agents"] == k]
+            if not rs:
+                continue
+            safe = [r["safety_rate"] for r in rs if r.get("safety_rate") not in (None, "")]
+            rate = f"{np.mean(safe):.1%}" if safe else "n/a"  # rows of an earlier release lack it
+            print(f"| {k} | {name} | {np.mean([r['success'] for r in rs]):.0%} | "
+                  f"{np.mean([r['isr'] for r in rs]):.1%} | {np.mean([r['cost_max'] for r in rs]):.2f} | "
+                  f"{np.mean([r['collisions'] for r in rs]):.1f} | {rate} | "
+                  f"{np.mean([r['makespan'] for r in rs]):.0f} |")
+
+
+if __name__ == "__main__":
+    main()
