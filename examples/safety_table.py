@@ -1,11 +1,12 @@
 """The safety layer against no layer, count by count: arrivals, cost, contacts and the safety rate.
 
-Reads two folders of ``safe-mapf evaluate`` (one with the safety layer, one with ``--safety off``,
-the same problems) and prints a Markdown table: CSR (runs in which every agent arrived), ISR
-(agents that arrived), the mean largest cumulative cost over all runs, contacts per run, the
-safety rate (agents that never touched another) and the makespan.
+Reads folders of ``safe-mapf evaluate`` (with the safety layer, and with ``--safety off`` on the
+same problems; several of each pool their runs, e.g. two seeds) and prints a Markdown table: CSR
+(runs in which every agent arrived), ISR (agents that arrived), the mean largest cumulative cost
+over all runs, contacts per run, the safety rate (agents that never touched another) and the
+makespan.
 
-Run: ``python examples/safety_table.py results/safety_on results/safety_off``
+Run: ``python examples/safety_table.py --on results/on_s1 results/on_s2 --off results/off_s1 results/off_s2``
 """
 from __future__ import annotations
 
@@ -19,16 +20,17 @@ from baselines.output import read_rows
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("on", type=Path, help="evaluate folder with the safety layer")
-    p.add_argument("off", type=Path, help="evaluate folder with --safety off")
+    p.add_argument("--on", type=Path, nargs="+", required=True, help="evaluate folders with the safety layer")
+    p.add_argument("--off", type=Path, nargs="+", required=True, help="evaluate folders with --safety off")
     args = p.parse_args(argv)
-    folders = {"on": args.on, "off": args.off}
     rows = {}
-    for name, folder in folders.items():
-        path = folder / "runs.csv"
-        if not path.is_file():
-            raise SystemExit(f"{path}: no such file (an output folder of safe-mapf evaluate?)")
-        rows[name] = read_rows(path)
+    for name, folders in (("on", args.on), ("off", args.off)):
+        rows[name] = []
+        for folder in folders:
+            path = folder / "runs.csv"
+            if not path.is_file():
+                raise SystemExit(f"{path}: no such file (an output folder of safe-mapf evaluate?)")
+            rows[name] += read_rows(path)
     print("| agents | layer | CSR | ISR | mean largest cost | contacts per run | safety rate | makespan |")
     print("|---|---|---|---|---|---|---|---|")
     for k in sorted({r["agents"] for r in rows["on"]}):
@@ -45,4 +47,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -447,12 +447,8 @@ class SearchPolicy(StuckReplanning):
                 raise ValueError("this SearchPolicy has a safety layer: pass the team's positions, "
                                  "predict(obs, positions=team_positions(env))")
             actions = self.safety.filter_agents(actions, positions, self.safety_state)
-            blocked = [a for a in actions if self.safety_state.blocked.get(a, 0) >= self.safety.patience]
-            if blocked:  # the layer has kept them from moving as asked for a while: stuck, as far as the plan goes
-                self.controller.report_stuck(blocked)
-                self.safety_state.deadlocks += len(blocked)
-                for a in blocked:
-                    self.safety_state.blocked[a] = 0
+            # kept from moving as asked for a while: stuck, as far as the plan goes
+            self.controller.report_stuck(self.safety_state.deadlocked)
         self._record_progress()
         if single:
             act = actions["agent_0"]

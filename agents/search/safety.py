@@ -15,22 +15,28 @@ of one step and changes it as little as it can so that no two agents come into c
    constraint binds, each of the two agents also turns aside by ``bias`` of its correction, both
    to their right, so that two agents meeting head on pass each other instead of stopping nose
    to nose.
-2. **Guard.** What the filter leaves is checked exactly: two discs moving in straight lines
-   over the step come no closer than ``2 * agent_radius + clearance / 2`` at any moment (unless
-   they are closer already and separate). A pair that would is stopped, both agents, and the
-   check repeats with the stopped agents (at most once per agent). Standing agents do not
-   approach anybody, so after the guard no pair starts a contact (up to a wall that deflects an
-   agent from its straight line within the step).
+2. **Walls.** The filter starts from what the walls let each agent do: an action component that
+   pushes into a wall ahead (the map's boxes grown by the radius) counts only as far as the wall.
+   An agent beside a parked agent turns to the side the walls leave open.
+3. **Guard.** What the filter leaves is checked exactly: two discs moving in straight lines
+   over the step, as asked and as the walls let them, come no closer than ``2 * agent_radius``
+   plus half the clearance at any moment (unless they are closer already and separate). A pair
+   that would is stopped, both agents, and the check repeats with the stopped agents (at most once
+   per agent). Standing agents do not approach anybody, so after the guard no pair starts a contact.
+4. **Deadlocks.** An agent the layer keeps from moving as asked on ``patience`` of its last
+   ``2 * patience`` steps is reported (:attr:`SafetyState.deadlocked`), so that the controller
+   counts it stuck and it escapes and replans like any stuck agent.
 
-What the layer reads is the **team's shared positions**: each agent's position in world units,
+What the layer reads is the **team's shared positions**, each agent's position in world units,
 as a team whose members share their localisation would have (the vector agents observe exactly
-that; panorama agents are given them). It reads no map and no plan.
+that; panorama agents are given them), and the map's walls. It reads no plan.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Deque, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -38,14 +44,19 @@ from scipy.spatial import cKDTree
 
 @dataclass
 class SafetyState:
-    """What the layer did in an episode: agent-steps it changed, agent-steps its guard stopped."""
+    """The layer's episode: what it did, and which agents it has kept from moving lately."""
 
+    #: agent-steps whose action the layer changed
     steered: int = 0
+    #: agent-steps its guard stopped
     stopped: int = 0
-    #: times an agent was kept from moving as asked for ``patience`` steps in a row and reported stuck
+    #: times an agent was reported in a deadlock (:attr:`deadlocked`)
     deadlocks: int = 0
-    #: per agent, consecutive steps up to now in which the layer kept it from moving as asked
-    blocked: Dict[str, int] = field(default_factory=dict)
+    #: per agent, for its last ``2 * patience`` steps, whether the layer kept it from moving as asked
+    held: Dict[str, Deque[bool]] = field(default_factory=dict)
+    #: the agents the last step found in a deadlock: held on ``patience`` of their last ``2 * patience``
+    #: steps (their record starts anew)
+    deadlocked: List[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -62,9 +73,10 @@ class SafetyLayer:
             agents may close in one step.
         bias: share of a correction by which each agent of a binding pair also turns to its right.
         iterations: dual ascent sweeps of the barrier filter.
-        patience: an agent the layer keeps from moving (to less than half of what it asked) this many
-            steps in a row is in a deadlock: a :class:`~agents.search.policy.SearchPolicy` then counts
-            it stuck, so that it escapes and replans.
+        patience: an agent the layer keeps from moving (to less than half of what it asked) on this
+            many of its last ``2 * patience`` steps is in a deadlock (:attr:`SafetyState.deadlocked`): a
+            :class:`~agents.search.policy.SearchPolicy` then counts it stuck, so that it escapes and
+            replans.
         walls: static boxes ``(x0, y0, x1, y1)`` that stop the agents (``None``: none); :meth:`for_env`
             gives the map's boxes and the world's border.
 
@@ -157,11 +169,10 @@ class SafetyLayer:
         d = p[i] - p[j]
         dist = np.sqrt((d * d).sum(-1))
         unit = np.where(dist[:, None] > 1e-12, d / np.maximum(dist, 1e-12)[:, None], _tiebreak(i, j))
-        # what walls let the agents do of what they ask: the part pushing into a wall is dropped
         # a disc that stands for good (parked) keeps only a tenth of the gap: the narrow way between it
-        # and a wall stays open
+        # and a wall stays open; the filter starts from what the walls let the agents do of what they ask
         pair_gap = np.where(mov[i] & mov[j], gap, 0.1 * gap)
-        u = self._barrier(self._slide(p, u0), i, j, unit, dist - self.contact - pair_gap, mov)
+        u = self._barrier(p, self._slide(p, u0), i, j, unit, dist - self.contact - pair_gap, mov)
         u = np.clip(u, -1.0, 1.0)
         u[~mov] = 0.0
         u, stopped = self._guard(p, u, i, j, d, dist, mov, self.contact + 0.5 * pair_gap)
@@ -202,13 +213,22 @@ class SafetyLayer:
         keep = mov[pairs[:, 0]] | mov[pairs[:, 1]]
         return pairs[keep, 0].astype(np.intp), pairs[keep, 1].astype(np.intp)
 
-    def _barrier(self, u0: np.ndarray, i: np.ndarray, j: np.ndarray, unit: np.ndarray, h: np.ndarray,
-                 mov: np.ndarray) -> np.ndarray:
+    def _barrier(self, p: np.ndarray, u0: np.ndarray, i: np.ndarray, j: np.ndarray, unit: np.ndarray,
+                 h: np.ndarray, mov: np.ndarray) -> np.ndarray:
         """The joint action closest to ``u0`` that meets every pair's barrier condition; where a
-        condition binds, the same from ``u0`` turned to the right of the binding pairs."""
+        condition binds, the same from ``u0`` turned aside for the binding pairs: two moving agents
+        both to their right, an agent beside a fixed disc to the side the walls leave open."""
         u, lam = self._project(u0, i, j, unit, h, mov)
         if self.bias > 0 and np.any(lam > 0):
             right = np.stack([unit[:, 1], -unit[:, 0]], axis=-1)  # n turned clockwise
+            fixed = mov[i] != mov[j]
+            if fixed.any() and self.walls is not None:
+                # the moving one of the pair, and its turn (i's turn is +right, j's is -right)
+                k = np.where(mov[i], i, j)[fixed]
+                sign = np.where(mov[i], 1.0, -1.0)[fixed]
+                t = right[fixed] * sign[:, None]
+                room = [np.hypot(*self._slide(p[k], d).T) for d in (t, -t)]  # how far each side gets
+                right[fixed] *= np.where(room[1] > room[0] + 1e-6, -1.0, 1.0)[:, None]
             turn = self.bias * lam[:, None] * right
             nominal = u0.copy()
             np.add.at(nominal, i, turn * mov[i, None])
@@ -291,11 +311,16 @@ class SafetyLayer:
         if state is not None:
             state.steered += int(steered.sum())
             state.stopped += int(stopped.sum())
+            state.deadlocked = []
             for k, a in enumerate(names):
                 if not mov[k]:
                     continue
-                kept = steered[k] and float(np.hypot(*out[k])) < 0.5 * float(np.hypot(*act[k]))
-                state.blocked[a] = state.blocked.get(a, 0) + 1 if kept else 0
+                held = state.held.setdefault(a, deque(maxlen=2 * self.patience))
+                held.append(bool(steered[k]) and float(np.hypot(*out[k])) < 0.5 * float(np.hypot(*act[k])))
+                if sum(held) >= self.patience:
+                    state.deadlocked.append(a)
+                    held.clear()
+            state.deadlocks += len(state.deadlocked)
         dtype = np.asarray(first).dtype if first is not None else np.float32
         return {a: out[k].astype(dtype) for k, a in enumerate(names) if mov[k]}
 

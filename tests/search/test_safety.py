@@ -1,5 +1,6 @@
 """The safety layer: no two agents touch, agents still arrive, and contacts are reported honestly without it."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -202,3 +203,15 @@ def test_walls_stop_what_the_layer_plans_with():
     assert layer.walls is not None and len(layer.walls) >= 4
     slid = layer._slide(np.array([[0.5, 10.0], [10.0, 10.0]]), np.array([[-1.0, 0.5], [-1.0, 0.5]]))
     np.testing.assert_allclose(slid, [[0.0, 0.5], [-1.0, 0.5]])
+
+
+def test_the_safety_table_reads_the_shipped_runs(run_example):
+    on = sorted(str(p) for p in Path("examples/safety").glob("*_on"))
+    off = sorted(str(p) for p in Path("examples/safety").glob("*_off"))
+    code, out = run_example("safety_table.py", "--on", *on, "--off", *off)
+    assert code in (None, 0)
+    rows = [r.split("|") for r in out.out.splitlines() if r.startswith("| 100 | ")]
+    (layer,), (bare,) = [[r for r in rows if r[2].strip() == name] for name in ("on", "off")]
+    assert layer[7].strip() == "100.0%" and float(bare[6]) > 0  # safety rate with it, contacts without
+    code, out = run_example("safety_table.py", "--on", "no/such/folder", "--off", *off)
+    assert "no/such/folder/runs.csv" in str(code)
