@@ -242,31 +242,56 @@ REASON_COLOURS = {"never_planned": "#999999", "deadlock": "#E69F00", "out_of_tim
                   "blocked_by_parked": "#CC79A7", "stuck_on_leg": "#D55E00"}
 
 
-def anatomy_figure(summary: Sequence[Dict[str, Any]], path: Any, title: str = "") -> Path:
-    """Stacked bars of the reasons per cell (failed agents per run), one panel per method."""
+def draw_anatomy(summary: Sequence[Dict[str, Any]], title: str = "") -> Any:
+    """The :func:`anatomy_figure` as a matplotlib ``Figure`` (not saved, not closed).
+
+    One panel per method with stacked bars of the reasons per cell (failed agents per run); the
+    legend, in its own column right of the panels, lists every reason in the order of the stack.
+    A panel without a failed agent says so and keeps a y-axis from 0.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
 
+    if not summary:
+        raise ValueError("no evaluation cells to draw")
     methods = list(dict.fromkeys(c["method"] for c in summary))
-    fig, axes = plt.subplots(len(methods), 1, figsize=(max(6.0, 0.55 * len(summary) / max(len(methods), 1) + 2), 2.6
-                                                        * len(methods)), squeeze=False)
+    width = max(6.0, 0.55 * len(summary) / len(methods) + 2) + 1.8  # + the legend column
+    fig, axes = plt.subplots(len(methods), 1, figsize=(width, 2.6 * len(methods)), squeeze=False,
+                             layout="constrained")
     for ax, m in zip(axes[:, 0], methods):
         cells = [c for c in summary if c["method"] == m]
         x = np.arange(len(cells))
         bottom = np.zeros(len(cells))
         for reason in REASONS:
-            h = np.array([c[reason] / c["runs"] for c in cells])
-            ax.bar(x, h, bottom=bottom, color=REASON_COLOURS[reason], label=reason.replace("_", " "), width=0.75)
+            h = np.array([c[reason] / c["runs"] if c["runs"] else 0.0 for c in cells])
+            ax.bar(x, h, bottom=bottom, color=REASON_COLOURS[reason], width=0.75)
             bottom += h
         ax.set_xticks(x, [f"{c['difficulty'][0].upper()}{c['agents']}" for c in cells])
         ax.set_ylabel("failed agents / run")
         ax.set_title(f"{m}" + (f" ({title})" if title else ""), fontsize=10)
         ax.grid(axis="y", alpha=0.3)
-    axes[0, 0].legend(fontsize=8, ncol=len(REASONS), loc="upper left", bbox_to_anchor=(0, 1.35), frameon=False)
+        if bottom.max(initial=0.0) > 0:
+            ax.set_ylim(bottom=0)
+        else:
+            ax.set_ylim(0, 1)
+            ax.text(0.5, 0.5, "no failures", transform=ax.transAxes, ha="center", va="center", fontsize=10,
+                    color="#555555")
+    handles = [Patch(color=REASON_COLOURS[r], label=r.replace("_", " ")) for r in reversed(REASONS)]
+    fig.legend(handles=handles, loc="outside right upper", fontsize=8, title="reason", title_fontsize=8,
+               frameon=False)
     axes[-1, 0].set_xlabel("cell: difficulty (E/M/H) and agent count")
-    fig.tight_layout()
+    return fig
+
+
+def anatomy_figure(summary: Sequence[Dict[str, Any]], path: Any, title: str = "") -> Path:
+    """Stacked bars of the reasons per cell (failed agents per run), one panel per method, saved to
+    ``path`` (see :func:`draw_anatomy`)."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_anatomy(summary, title)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -275,5 +300,5 @@ def anatomy_figure(summary: Sequence[Dict[str, Any]], path: Any, title: str = ""
 
 
 __all__ = ["AgentFailure", "FailureTracker", "HELD_SHARE", "MOVING_SHARE", "REASONS", "WINDOW", "anatomy_figure",
-           "anatomy_table", "classify", "failure_records", "failure_summary", "failures_field",
+           "anatomy_table", "classify", "draw_anatomy", "failure_records", "failure_summary", "failures_field",
            "parse_failures_field"]

@@ -8,7 +8,7 @@ import json
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mapf", help="solve a MovingAI MAPF instance with Conflict-Based Search",
                        description=run.__doc__)
-    p.add_argument("map", metavar="MAP", help="MovingAI .map file")
+    p.add_argument("map", metavar="MAP", help="MovingAI .map file (free cells . G S, blocked @ O T W)")
     p.add_argument("scen", metavar="SCEN", help="MovingAI .scen file (its first K agents are used)")
     p.add_argument("--agents", "-k", type=int, required=True, metavar="K", help="number of agents")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S", help="seconds (default 60)")
@@ -31,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Solve the first K agents of a MovingAI scenario (4-connected moves and waits, vertex and
     swap conflicts, agents stay at their goal, sum of costs) and report status, sum of costs,
-    makespan, runtime and search statistics. Exit code 0 when solved, 1 otherwise."""
+    makespan, runtime and search statistics. Exit code 0 when solved, 1 otherwise, 2 when a file
+    or an option is refused (with a message saying why; a file's names the file and line)."""
     from agents.search.mapf import DEFAULT_MEMORY_LIMIT_MB, load_instance, solve_cbs, validate
 
     if args.agents < 1:
@@ -43,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
                     suboptimality=args.suboptimality, node_limit=args.node_limit,
                     memory_limit_mb=memory,
                     vanilla=args.vanilla, heuristic=args.heuristic, grid_coords=inst.cells)
-    violations = validate(inst.graph, inst.starts, inst.goals, res.paths) if res.solved else None
+    violations = (validate(inst.graph, inst.starts, inst.goals, res.paths)
+                  if res.solved and res.paths is not None else None)
     out = {
         "map": args.map,
         "scen": args.scen,

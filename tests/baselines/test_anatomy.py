@@ -12,6 +12,7 @@ from baselines.anatomy import (
     anatomy_figure,
     anatomy_table,
     classify,
+    draw_anatomy,
     failure_records,
     failure_summary,
     failures_field,
@@ -115,6 +116,33 @@ def test_summary_table_and_figure(tmp_path):
     assert all(r in table.splitlines()[0] for r in REASONS)
     png = anatomy_figure(summary, tmp_path / "a.png", title="test")
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_figure_shows_every_reason_and_says_when_a_method_has_no_failures():
+    import matplotlib.pyplot as plt
+
+    all_reasons = ";".join(f"agent_{i}:{r}" for i, r in enumerate(REASONS))
+    rows = [{"method": m, "agents": k, "difficulty": d, "problem": 0, "failures": f}
+            for m, f in (("ours", all_reasons), ("sgm", "")) for k, d in ((1, "easy"), (5, "hard"))]
+    fig = draw_anatomy(failure_summary(rows), title="test")
+    try:
+        fig.canvas.draw()
+        (legend,) = fig.legends
+        labels = [t.get_text() for t in legend.get_texts()]
+        assert sorted(labels) == sorted(r.replace("_", " ") for r in REASONS) and "stuck on leg" in labels
+        # the whole legend lies inside the saved image (no entry cut off at its edge)
+        box, page = legend.get_window_extent(), fig.bbox
+        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+        ours, sgm = fig.axes
+        assert ours.get_ylim()[0] == 0 and ours.get_ylim()[1] >= len(REASONS)
+        assert not [t for t in ours.texts if t.get_text() == "no failures"]
+        # a method without a failed agent: a note and an axis from 0, not a band around it
+        assert [t.get_text() for t in sgm.texts] == ["no failures"]
+        assert sgm.get_ylim() == (0.0, 1.0)
+    finally:
+        plt.close(fig)
+    with pytest.raises(ValueError, match="no evaluation cells"):
+        draw_anatomy([])
 
 
 def test_an_execution_records_why_agents_failed(stand_in_models):

@@ -6,7 +6,11 @@ agents stay at their goal; the cost is the sum of final arrival times. In ``.sce
 ``x`` is the column and ``y`` the row; the 9th column is an 8-connected (octile) length and
 is *not* the 4-connected cost, so it is loaded only for reference.
 
-Free cells (``.``, ``G``, ``S``) become graph nodes numbered in row-major order.
+Free cells (``.``, ``G``, ``S``) become graph nodes numbered in row-major order; ``@``, ``O``,
+``T`` and ``W`` are blocked. Any other character in the grid, a row of another length than the
+header's ``width``, a grid of another number of rows than its ``height``, an empty grid, a file
+that is not UTF-8 text or a ``.scen`` line that cannot be read is refused with a
+:class:`MovingAIFormatError` that names the file (and the line).
 """
 from __future__ import annotations
 
@@ -18,6 +22,8 @@ import numpy as np
 from scipy import sparse
 
 FREE_CHARS = frozenset(".GS")
+#: terrain an agent may not enter (out of bounds, trees, water)
+BLOCKED_CHARS = frozenset("@OTW")
 Cell = Tuple[int, int]
 PathLike = Union[str, Path]
 
@@ -49,12 +55,37 @@ class ScenAgent:
     #: the map the line names (file name as written) and its ``(width, height)``
     map_name: str = ""
     map_size: Tuple[int, int] = (0, 0)
+    #: the line of the ``.scen`` file it was read from (1-based; 0 when not read from a file)
+    line: int = field(default=0, compare=False)
+
+
+class MovingAIFormatError(ValueError):
+    """A ``.map`` or ``.scen`` file that does not follow the MovingAI format; the message names
+    the file and, where one is to blame, the line (``path:line: ...``)."""
+
+
+def _read_lines(path: Path) -> List[str]:
+    """The file's lines; :class:`MovingAIFormatError` naming the file when it is not UTF-8 text."""
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise MovingAIFormatError(f"{path}: not a text file (the byte at offset {exc.start} is not UTF-8)") from None
+    if "\0" in text:
+        raise MovingAIFormatError(f"{path}: not a text file (it holds NUL bytes)")
+    return text.splitlines()
 
 
 def load_map(path: PathLike) -> GridMap:
-    """Read a MovingAI ``.map`` file."""
+    """Read a MovingAI ``.map`` file.
+
+    The header (``type``, ``height``, ``width``) ends with a line ``map``; then come exactly
+    ``height`` rows of ``width`` characters from ``.GS`` (free) and ``@OTW`` (blocked). Trailing
+    whitespace of a row and blank lines after the grid are ignored; anything else that breaks
+    these rules raises :class:`MovingAIFormatError` naming the file and line.
+    """
     path = Path(path)
-    lines = path.read_text().splitlines()
+    lines = _read_lines(path)
     header = {}
     i = 0
     while i < len(lines) and lines[i].strip().lower() != "map":
@@ -63,38 +94,67 @@ def load_map(path: PathLike) -> GridMap:
             header[parts[0].lower()] = parts[1]
         i += 1
     if i == len(lines):
-        raise ValueError(f"{path}: no 'map' line in the header")
+        raise MovingAIFormatError(f"{path}: no 'map' line in the header")
     try:
         h, w = int(header["height"]), int(header["width"])
-    except (KeyError, ValueError) as exc:
-        raise ValueError(f"{path}: header needs integer 'height' and 'width'") from exc
-    rows = lines[i + 1:i + 1 + h]
-    if len(rows) != h or any(len(r) < w for r in rows):
-        raise ValueError(f"{path}: expected {h} rows of {w} characters")
-    free = np.array([[ch in FREE_CHARS for ch in r[:w]] for r in rows], dtype=bool)
+    except (KeyError, ValueError):
+        raise MovingAIFormatError(f"{path}: header needs integer 'height' and 'width'") from None
+    if h < 1 or w < 1:
+        raise MovingAIFormatError(f"{path}: the header gives a {h} x {w} map (height x width); "
+                                  "both must be at least 1")
+    first = i + 1  # index of the grid's first row in ``lines``
+    rows = [r.rstrip() for r in lines[first:first + h]]
+    if len(rows) < h:
+        raise MovingAIFormatError(f"{path}: the header gives height {h}, the grid has {len(rows)} rows")
+    extra = next((j for j in range(first + h, len(lines)) if lines[j].strip()), None)
+    if extra is not None:
+        raise MovingAIFormatError(f"{path}:{extra + 1}: the header gives height {h}, the grid goes on past it")
+    known = FREE_CHARS | BLOCKED_CHARS
+    for j, r in enumerate(rows):
+        ln = first + j + 1
+        if len(r) != w:
+            raise MovingAIFormatError(f"{path}:{ln}: row of {len(r)} characters, the header gives width {w}")
+        bad = next((ch for ch in r if ch not in known), None)
+        if bad is not None:
+            raise MovingAIFormatError(f"{path}:{ln}: unknown map character {bad!r} in column {r.index(bad) + 1} "
+                                      f"(free: {''.join(sorted(FREE_CHARS))}; "
+                                      f"blocked: {''.join(sorted(BLOCKED_CHARS))})")
+    free = np.array([[ch in FREE_CHARS for ch in r] for r in rows], dtype=bool)
     return GridMap(free, path.stem)
 
 
 def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
-    """Read the first ``k`` agents (all if ``None``) of a MovingAI ``.scen`` file."""
+    """Read the first ``k`` agents (all if ``None``) of a MovingAI ``.scen`` file.
+
+    After an optional ``version`` line, each line has 9 columns (tab-separated, or
+    whitespace-separated where it has no tab): bucket, map file, map width, map height, start x,
+    start y, goal x, goal y, octile length. A line that cannot be read raises
+    :class:`MovingAIFormatError` naming the file and line.
+    """
     path = Path(path)
     out: List[ScenAgent] = []
-    for ln, line in enumerate(path.read_text().splitlines()):
+    for ln, line in enumerate(_read_lines(path)):
         if not line.strip() or line.lower().startswith("version"):
             continue
         parts = line.split("\t") if "\t" in line else line.split()
         if len(parts) < 9:
-            raise ValueError(f"{path}:{ln + 1}: expected 9 columns, got {len(parts)}")
+            raise MovingAIFormatError(f"{path}:{ln + 1}: expected 9 columns, got {len(parts)}")
         try:
             sx, sy, gx, gy = (int(p) for p in parts[4:8])
-            out.append(ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0]), parts[1].strip(),
-                                 (int(parts[2]), int(parts[3]))))
+            agent = ScenAgent((sy, sx), (gy, gx), float(parts[8]), int(parts[0]), parts[1].strip(),
+                              (int(parts[2]), int(parts[3])), line=ln + 1)
         except ValueError as exc:
-            raise ValueError(f"{path}:{ln + 1}: cannot read the agent's bucket, cells or length ({exc})") from None
+            raise MovingAIFormatError(f"{path}:{ln + 1}: cannot read the agent's bucket, cells or length "
+                                      f"({exc})") from None
+        if min(sx, sy, gx, gy) < 0:
+            raise MovingAIFormatError(f"{path}:{ln + 1}: negative cell coordinate")
+        out.append(agent)
         if k is not None and len(out) >= k:
             break
     if k is not None and len(out) < k:
-        raise ValueError(f"{path} has {len(out)} agents, {k} requested")
+        raise MovingAIFormatError(f"{path} has {len(out)} agents, {k} requested")
+    if not out:
+        raise MovingAIFormatError(f"{path}: no agent lines")
     return out
 
 
@@ -173,10 +233,15 @@ def check_scen_matches_map(agents: Sequence[ScenAgent], grid: GridMap, map_path:
     for i, a in enumerate(agents):
         named = Path(a.map_name.replace("\\", "/")).name
         if named and named != want:
-            raise ValueError(f"{scen_path}: agent {i} belongs to map {a.map_name!r}, not {want!r}")
+            raise ValueError(f"{_where(scen_path, a)}: agent {i} belongs to map {a.map_name!r}, not {want!r}")
         if a.map_size != (0, 0) and a.map_size != (grid.width, grid.height):
-            raise ValueError(f"{scen_path}: agent {i} is for a {a.map_size[0]}x{a.map_size[1]} map (width x height); "
-                             f"{want} is {grid.width}x{grid.height}")
+            raise ValueError(f"{_where(scen_path, a)}: agent {i} is for a {a.map_size[0]}x{a.map_size[1]} map "
+                             f"(width x height); {want} is {grid.width}x{grid.height}")
+
+
+def _where(scen_path: PathLike, agent: ScenAgent) -> str:
+    """``path:line`` of the scenario line an agent was read from (``path`` where not known)."""
+    return f"{scen_path}:{agent.line}" if agent.line else str(scen_path)
 
 
 def load_instance(map_path: PathLike, scen_path: PathLike, k: Optional[int] = None) -> GridInstance:
@@ -190,7 +255,8 @@ def load_instance(map_path: PathLike, scen_path: PathLike, k: Optional[int] = No
         for what, cell in (("start", a.start), ("goal", a.goal)):
             r, c = cell
             if not (0 <= r < grid.height and 0 <= c < grid.width) or index[r, c] < 0:
-                raise ValueError(f"{scen_path}: agent {i} {what} (row={r}, col={c}) is not a free cell of {map_path}")
+                raise ValueError(f"{_where(scen_path, a)}: agent {i} {what} (row={r}, col={c}) is not a free cell "
+                                 f"of {map_path}")
     inst.starts = [inst.node(a.start) for a in agents]
     inst.goals = [inst.node(a.goal) for a in agents]
     return inst
