@@ -32,11 +32,9 @@ from .checks import (
     check_goal_distance,
     check_number,
     parse_reset_options,
-    plural,
     show,
 )
 from .formats import flat_space, flatten_agents
-from .scenario import RANDOM_FILL
 from .world import World
 
 _RESET_OPTIONS = ("starts", "goals", "goal_distance")
@@ -131,10 +129,13 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
     argument, not a reset option: with it set, sampled starts are restricted to positions whose
     cost is at most that value.
 
-    Capacity is checked up front: ``n_agents`` beyond what the map's free area can hold
-    without overlap raises ``ValueError`` in the constructor, and sampling more starts (or
-    goals) than random placement can fit at ``min_separation`` raises at ``reset``; both
-    messages say how many agents fit.
+    Capacity is decided in the constructor, by the placement ``reset`` uses
+    (:meth:`NavigationScenario.sample_separated
+    <safe_mapf_envs.scenario.NavigationScenario.sample_separated>`: uniform draws, and where they
+    do not separate, random positions of a deterministic packing of the map, moved at random).
+    :attr:`capacity` is the size of that packing: ``reset`` places any ``n_agents`` up to it, at
+    every seed, and a larger ``n_agents`` raises ``ValueError`` naming both numbers. Goals in a
+    ``goal_distance`` band are drawn agent by agent and can still fail in a crowded band.
 
     ## Episode End
     An agent is ``terminated`` when its centre comes within ``goal_threshold`` of its goal: it
@@ -161,8 +162,9 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
     - ``collision_cost`` (0.0): cost added per contact with another agent;
     - ``agent_collisions`` (True): ``False`` lets agents pass through each other (the
       convention of the published code of the paper: its agents never touch); walls and
-      obstacles still stop them, no contacts are reported, pinned starts (and goals) may overlap
-      and ``n_agents`` is not bounded by the map's area;
+      obstacles still stop them, no contacts are reported and pinned starts (and goals) may
+      overlap (sampled ones keep ``min_separation``, so :attr:`capacity` bounds ``n_agents`` here
+      too);
     - ``observe_neighbors`` (0): adds the ``neighbors`` key with this many nearest agents;
     - ``obs_type`` ("vector" or "panorama"): the observation type (see :attr:`obs_types`);
     - ``observation_format`` ("dict" or "flat"): see Observation Space;
@@ -236,13 +238,8 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
                 f"got {show(min_separation)}"
             )
         self.min_separation = min_separation
-        fit = self.scenario.max_agents(2.0 * radius)
-        if n_agents > fit and self.agent_collisions:
-            raise ValueError(
-                f"n_agents={n_agents} cannot fit on {self.scenario.layout.name}: its free area holds at most "
-                f"{plural(fit, 'agent')} of radius {radius:g} without overlap (and sampled starts need more room: "
-                f"about {self.scenario.max_agents(min_separation, RANDOM_FILL)} at min_separation={min_separation:g})"
-            )
+        #: The most agents this env takes: every ``reset`` places that many (see Starting State).
+        self.capacity = self.scenario.check_agent_count(n_agents, min_separation, self.max_start_cost)
         self.metadata = {**type(self).metadata, "name": f"{_snake(self.scenario.layout.name)}_v0"}
         self._goal_images = np.zeros((n_agents, 0), dtype=np.uint8)
 

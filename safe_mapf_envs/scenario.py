@@ -3,7 +3,7 @@ sampling, input checks and the ground-truth geodesic oracle.
 """
 from __future__ import annotations
 
-from typing import Optional, Protocol, Sequence, Tuple
+from typing import Any, Dict, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -30,6 +30,11 @@ class Layout(Protocol):
 #: sequential placement jams at about 0.547 of the plane (Feder, 1980). Sampling more agents
 #: than this share allows is hopeless, however long it runs.
 RANDOM_FILL = 0.55
+
+#: :meth:`NavigationScenario.packing` results by map and arguments (environments built on one map
+#: share them), at most :data:`_PACKINGS_KEPT`, the oldest dropped first.
+_PACKINGS: Dict[Tuple[Any, ...], np.ndarray] = {}
+_PACKINGS_KEPT = 64
 
 
 def resolve_layout(layout) -> Layout:
@@ -301,48 +306,212 @@ class NavigationScenario:
         shrunk[:, 3] = np.minimum(shrunk[:, 3], h + e)
         return (w + 2 * e) * (h + 2 * e) - union_area(shrunk)
 
+    # ----------------------------------------------------------------- separated placement
+    def _allowed(self, points: np.ndarray, max_cost: Optional[float]) -> np.ndarray:
+        """``True`` where a position is free and, with ``max_cost``, costs at most that much
+        (``points`` of shape ``(k, 2)``, checked in chunks to bound the memory)."""
+        ok = np.empty(len(points), dtype=bool)
+        for i in range(0, len(points), 1 << 15):
+            chunk = points[i:i + (1 << 15)]
+            ok[i:i + len(chunk)] = self.is_free(chunk)
+            if max_cost is not None:
+                ok[i:i + len(chunk)] &= self.field.cost(chunk) <= max_cost
+        return ok
+
+    def packing(self, separation: float, max_cost: Optional[float] = None) -> np.ndarray:
+        """Free positions at least ``separation`` apart, as many as a deterministic packing finds.
+
+        The larger of two packings: the densest of 32 hexagonal lattices (two orientations, 16
+        offsets) with its gaps filled greedily, and a greedy scan of a grid of an eighth of
+        ``separation`` row by row (or column by column), which follows corridors and furniture.
+        With ``max_cost``, only positions whose cost is at most that value. The result depends on
+        the map and the arguments alone; it is cached, and read-only, shape ``(k, 2)``.
+        :meth:`sample_separated` places up to ``k`` positions on every call.
+        """
+        sep = check_number(separation, "separation", strict=True)
+        if not sep >= 2.0 * self.agent_radius:
+            raise ValueError(
+                f"separation must be at least 2 * agent_radius = {2.0 * self.agent_radius:g}, got {sep:g}"
+            )
+        if max_cost is not None:
+            max_cost = check_number(max_cost, "max_cost")
+        f = self.field
+        key = (self.size, tuple(map(tuple, f.boxes.tolist())), self.agent_radius, sep, max_cost,
+               None if max_cost is None else (f.cost_radius, f.cost_fn, f.boundary_cost))
+        pts = _PACKINGS.get(key)
+        if pts is None:
+            s = sep * (1.0 + 1e-9)  # a margin over rounding: packed positions are never closer than sep
+            lattice = self._lattice(s, max_cost)
+            found = [
+                self._greedy_scan(s, max_cost, lattice, across=False),
+                self._greedy_scan(s, max_cost, np.zeros((0, 2)), across=False),
+                self._greedy_scan(s, max_cost, np.zeros((0, 2)), across=True),
+            ]
+            pts = max(found, key=len)
+            pts.setflags(write=False)
+            if len(_PACKINGS) >= _PACKINGS_KEPT:
+                _PACKINGS.pop(next(iter(_PACKINGS)))
+            _PACKINGS[key] = pts
+        return pts
+
+    def capacity(self, separation: float, max_cost: Optional[float] = None) -> int:
+        """How many free positions :meth:`sample_separated` places at least ``separation`` apart
+        (with ``max_cost``: costing at most that much), on every call: ``len(packing(...))``."""
+        return len(self.packing(separation, max_cost))
+
+    def _allowed_grid(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """:meth:`is_free` on the grid of ``xs`` by ``ys``, shape ``(len(ys), len(xs))``, box by box
+        (the same arithmetic as :meth:`ObstacleField.inside <safe_mapf_envs.cost.ObstacleField.inside>`)."""
+        r = self.agent_radius
+        w, h = self.size
+        free = ~(((ys < r) | (ys > h - r))[:, None] | ((xs < r) | (xs > w - r))[None, :])
+        for x0, y0, x1, y1 in self.field.boxes.tolist():
+            gx = np.maximum(np.maximum(x0 - xs, xs - x1), 0.0)
+            gy = np.maximum(np.maximum(y0 - ys, ys - y1), 0.0)
+            free &= np.sqrt(gy[:, None] * gy[:, None] + gx[None, :] * gx[None, :]) >= r
+        return free
+
+    def check_agent_count(self, n: int, min_separation: float, max_start_cost: Optional[float] = None) -> int:
+        """The capacity for agents whose sampled starts (costing at most ``max_start_cost``) and goals
+        are ``min_separation`` apart; ``ValueError`` naming ``n`` and the capacity if ``n`` exceeds it."""
+        fit = self.capacity(min_separation)
+        if max_start_cost is not None:
+            fit = min(fit, self.capacity(min_separation, max_start_cost))
+        if n > fit:
+            cheap = "" if max_start_cost is None else f" (starts with cost <= {max_start_cost:g})"
+            raise ValueError(
+                f"n_agents={n} cannot fit on {self.layout.name}: its capacity is {plural(fit, 'agent')} of radius "
+                f"{self.agent_radius:g} with starts and goals at least min_separation={min_separation:g} apart{cheap}; "
+                f"use at most {fit} agents or a smaller min_separation (the least is 2 * agent_radius = "
+                f"{2.0 * self.agent_radius:g})"
+            )
+        return fit
+
+    def _lattice(self, s: float, max_cost: Optional[float]) -> np.ndarray:
+        """The allowed points of the hexagonal lattice of spacing ``s`` that has the most of them,
+        of two orientations and 4 x 4 offsets, anchored at the free border ``agent_radius`` in."""
+        r = self.agent_radius
+        row = s * np.sqrt(3.0) / 2.0
+        best = np.zeros((0, 2))
+        for across in (False, True):
+            w, h = self.size[::-1] if across else self.size
+            if w < 2 * r or h < 2 * r:
+                continue
+            j = np.arange(int((h - 2 * r) / row) + 2)
+            i = np.arange(-1, int((w - 2 * r) / s) + 2)
+            for fy in np.arange(4) / 4.0:
+                for fx in np.arange(4) / 4.0:
+                    y = r + (fy + j) * row
+                    x = r + (fx + i[None, :] + 0.5 * (j[:, None] % 2)) * s
+                    pts = np.stack([x, np.broadcast_to(y[:, None], x.shape)], -1).reshape(-1, 2)
+                    pts = pts[(pts[:, 0] >= r) & (pts[:, 0] <= w - r) & (pts[:, 1] <= h - r)]
+                    if across:
+                        pts = pts[:, ::-1]
+                    pts = pts[self._allowed(pts, max_cost)]
+                    if len(pts) > len(best):
+                        best = pts
+        return best
+
+    def _greedy_scan(self, s: float, max_cost: Optional[float], base: np.ndarray, across: bool) -> np.ndarray:
+        """``base`` plus every allowed point of a grid of spacing ``s / 8`` that is at least ``s`` from
+        the points taken before it, scanned row by row (column by column when ``across``)."""
+        r, d = self.agent_radius, s / 8.0
+        w, h = self.size[::-1] if across else self.size
+        xs = r + np.arange(int(np.floor((w - 2 * r) / d)) + 1) * d
+        ys = r + np.arange(int(np.floor((h - 2 * r) / d)) + 1) * d
+        allowed = self._allowed_grid(ys, xs).T if across else self._allowed_grid(xs, ys)
+        if max_cost is not None or len(base):
+            gx, gy = np.meshgrid(xs, ys)
+            grid = np.stack([gy, gx] if across else [gx, gy], -1).reshape(-1, 2)[allowed.ravel()]  # world (x, y)
+            keep = np.ones(len(grid), dtype=bool) if max_cost is None else self._allowed(grid, max_cost)
+            if len(base):
+                keep &= cKDTree(base).query(grid)[0] >= s
+            allowed[allowed] = keep
+        s2 = s * s
+        taken = [base]
+        recent = np.zeros((0, 2))  # taken by this scan in the rows less than s above (scan coordinates)
+        for y, ok in zip(ys.tolist(), allowed):
+            if not ok.any():
+                recent = recent[recent[:, 1] > y - s]
+                continue
+            if len(recent):
+                dx, dy = xs[ok][:, None] - recent[None, :, 0], y - recent[None, :, 1]
+                ok = ok.copy()
+                ok[ok] = (dx * dx + dy * dy).min(1) >= s2
+            new, last = [], -np.inf
+            for x in xs[ok].tolist():
+                if x - last >= s:
+                    new.append(x)
+                    last = x
+            recent = recent[recent[:, 1] > y - s]
+            if new:
+                pts = np.stack([np.array(new), np.full(len(new), y)], 1)
+                recent = np.concatenate([recent, pts])
+                taken.append(pts[:, ::-1] if across else pts)
+        return np.concatenate(taken)
+
     def sample_separated(
         self, n: int, separation: float, rng: np.random.Generator, max_cost: Optional[float] = None,
         what: str = "position", rounds: int = 1000, separation_name: str = "separation",
     ) -> np.ndarray:
-        """``n`` free positions at least ``separation`` apart, shape ``(n, 2)``.
+        """``n`` free positions at least ``separation`` apart, shape ``(n, 2)``; it succeeds for every
+        ``n`` up to :meth:`capacity` and refuses more at once (``ValueError`` naming both).
 
-        All ``n`` are drawn at once; then every round redraws the later position of each pair
-        that is too close, so the result depends on the generator alone. Counts beyond what
-        random sampling can place (see :meth:`max_agents` with :data:`RANDOM_FILL`) fail at
-        once; otherwise ``ValueError`` after ``rounds`` rounds, saying how many positions were
-        apart at best. ``what`` and ``separation_name`` name the positions and the separation in
-        messages.
+        First all ``n`` are drawn uniformly at once and every round redraws the later position of
+        each pair that is too close, for at most ``rounds`` rounds (skipped for counts beyond what
+        random sampling can place, :meth:`max_agents` with :data:`RANDOM_FILL`). If that does not
+        separate them, ``n`` positions of :meth:`packing` are drawn at random and then moved by 40
+        rounds of random moves, each kept where it leaves the position allowed and ``separation``
+        from the others (in a crowd near the capacity most positions cannot move). The result
+        depends on the generator alone. ``what`` and ``separation_name`` name the positions and
+        the separation in messages.
         """
+        n = check_count(n, "n", 0)
         sep = float(separation)
-        fit = self.max_agents(sep, RANDOM_FILL)
-        if n > max(fit, 1):
+        fit = self.capacity(sep, max_cost)
+        if n > fit:
+            cheap = "" if max_cost is None else f" with cost <= {max_cost:g}"
             raise ValueError(
                 f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name}: "
-                f"random sampling cannot place more than about {fit} at that separation in its free area; use at "
-                f"most {fit} or a smaller {separation_name} (the least is 2 * agent_radius = "
-                f"{2.0 * self.agent_radius:g})"
+                f"its capacity is {fit}{cheap} at that separation; use at most {fit} or a smaller "
+                f"{separation_name} (the least is 2 * agent_radius = {2.0 * self.agent_radius:g})"
             )
-        pts = self.sample_states(n, rng, max_cost=max_cost)
-        sep2 = sep * sep
-        reach = sep * (1.0 + 1e-9) + 1e-12  # candidate pairs; the exact test follows
-        best = 0
-        for _ in range(rounds):
-            pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
-            if len(pairs):
-                d = pts[pairs[:, 0]] - pts[pairs[:, 1]]
-                pairs = pairs[(d * d).sum(-1) < sep2]
-            redraw = np.unique(pairs.max(axis=1)) if len(pairs) else np.zeros(0, np.intp)
-            if len(redraw) == 0:
-                return pts
-            best = max(best, n - len(redraw))
-            pts[redraw] = self.sample_states(len(redraw), rng, max_cost=max_cost)
-        raise ValueError(
-            f"could not place {plural(n, what)} at least {separation_name}={sep:g} apart on {self.layout.name} "
-            f"in {rounds} rounds of sampling (at best {best} were apart); use fewer agents or a smaller "
-            f"{separation_name}"
-        )
+        if n <= max(self.max_agents(sep, RANDOM_FILL), 1):
+            pts = self.sample_states(n, rng, max_cost=max_cost)
+            sep2 = sep * sep
+            reach = sep * (1.0 + 1e-9) + 1e-12  # candidate pairs; the exact test follows
+            for _ in range(rounds):
+                pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
+                if len(pairs):
+                    d = pts[pairs[:, 0]] - pts[pairs[:, 1]]
+                    pairs = pairs[(d * d).sum(-1) < sep2]
+                if not len(pairs):
+                    return pts
+                redraw = np.unique(pairs.max(axis=1))
+                pts[redraw] = self.sample_states(len(redraw), rng, max_cost=max_cost)
+        return self._shuffled_packing(n, sep, rng, max_cost)
 
+    def _shuffled_packing(self, n: int, sep: float, rng: np.random.Generator, max_cost: Optional[float],
+                          moves: int = 40) -> np.ndarray:
+        """``n`` random positions of :meth:`packing`, each then moved ``moves`` times at random
+        (up to ``sep / 4`` per axis) where the move keeps it allowed and ``sep`` from the others."""
+        slots = self.packing(sep, max_cost)
+        pts = slots[rng.choice(len(slots), size=n, replace=False)]
+        sep2 = sep * sep
+        reach = sep * (1.0 + 1e-9) + 1e-12
+        for _ in range(moves):
+            prop = pts + rng.uniform(-0.25 * sep, 0.25 * sep, size=pts.shape)
+            ok = self._allowed(prop, max_cost)
+            # a move is refused when the new place is too close to another's old or new place
+            pairs = cKDTree(np.concatenate([pts, prop])).query_pairs(reach, output_type="ndarray")
+            if len(pairs):
+                both = np.concatenate([pts, prop])
+                d = both[pairs[:, 0]] - both[pairs[:, 1]]
+                pairs = pairs[((d * d).sum(-1) < sep2) & (pairs[:, 0] % n != pairs[:, 1] % n)]
+                moved = pairs[pairs >= n] - n  # the movers in a clash (indices n.. are new places)
+                ok[moved] = False
+            pts[ok] = prop[ok]
+        return pts
 
     def check_agent_positions(self, points, n: int, what: str, overlap_ok: bool = False) -> np.ndarray:
         """Validate user-given starts or goals as an ``(n, 2)`` array: one free position per agent,
@@ -387,12 +556,12 @@ class NavigationScenario:
         too close to an earlier agent's goal is repeated.
         """
         sep = float(min_separation)
-        fit = self.max_agents(sep, RANDOM_FILL)
-        if len(starts) > max(fit, 1):
+        fit = self.capacity(sep)
+        if len(starts) > fit:
             raise ValueError(
                 f"could not place {plural(len(starts), 'goal')} at least min_separation={sep:g} apart on "
-                f"{self.layout.name}: random sampling fits about {plural(fit, 'goal')} at that separation; "
-                "use fewer agents or a smaller min_separation"
+                f"{self.layout.name}: its capacity is {fit} at that separation; use fewer agents or a smaller "
+                "min_separation"
             )
         goals = np.empty_like(starts)
         for i, start in enumerate(starts):

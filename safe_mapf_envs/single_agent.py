@@ -1,7 +1,7 @@
 """The single-agent goal-conditioned safe navigation environment (Gymnasium)."""
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import gymnasium as gym
 import numpy as np
@@ -13,6 +13,29 @@ from .formats import flat_space, flatten_observation
 from .world import World
 
 _RESET_OPTIONS = ("start", "goal", "goal_distance")
+
+
+class _dict_format_only:
+    """A method that exists only on envs with ``observation_format="dict"``: on the flat format
+    reading it raises ``AttributeError``, so ``hasattr(env, name)`` is ``False`` there."""
+
+    def __init__(self, fn: Callable[..., Any]) -> None:
+        self.fn = fn
+        self.__doc__ = fn.__doc__
+        self.name = fn.__name__
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, objtype: Optional[type] = None) -> Callable[..., Any]:
+        if obj is None:
+            return self.fn
+        if getattr(obj, "observation_format", "dict") != "dict":
+            raise AttributeError(
+                f"{self.name} is defined with observation_format='dict' only (the goal-conditioned format); "
+                "this env has observation_format='flat': use compute_terminated, which takes the same goals"
+            )
+        return self.fn.__get__(obj, objtype)
 
 
 class SafeNavigationEnv(NavigationEnvBase, gym.Env):
@@ -53,7 +76,10 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     :mod:`safe_mapf_envs.formats`): ``[observation, desired_goal]`` (``float32``, 4 values) for
     vectors, and for panoramas the channel-first ``uint8`` image ``(4, 2S, 4S)`` with the
     agent's four views on top and the goal's below. The Dict space stays available as
-    :attr:`goal_observation_space`; :meth:`compute_reward` and friends take its goals.
+    :attr:`goal_observation_space`; :meth:`compute_terminated`, :meth:`compute_truncated` and
+    :meth:`compute_cost` take its goals. :meth:`compute_reward` exists on the Dict format only, so
+    that tools which take an env with ``compute_reward`` for a goal env (SB3's ``check_env`` and
+    ``HerReplayBuffer``) take the flat env for a plain one.
 
     With ``obs_type="panorama"`` (the ``SafeApartment*`` ids) the three keys are images
     instead: ``Box(0, 255, (4, S, S, 4), uint8)``, the views north, east, south and west
@@ -161,7 +187,9 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
     :meth:`geodesic_distance`, :meth:`observations_at`, :meth:`normalize`.
 
     SB3's ``check_env`` calls ``compute_reward`` on the object it is given, which Gymnasium's
-    wrappers do not forward: check ``gymnasium.make(id).unwrapped``.
+    wrappers do not forward: check ``gymnasium.make(id).unwrapped``. With
+    ``observation_format="flat"`` the env has no ``compute_reward`` and passes the checker as a
+    plain env, wrapped or not.
 
     ## Version History
     - v0: initial release.
@@ -350,11 +378,15 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         return obs, 0.0 if terminated else -1.0, terminated, False, info
 
     # ----------------------------------------------------------------- GoalEnv API
+    @_dict_format_only
     def compute_reward(self, achieved_goal, desired_goal, info) -> Union[float, np.ndarray]:
         """``0`` where :meth:`compute_terminated` holds, ``-1`` elsewhere (single goals or batches).
 
         The reward :meth:`step` returns for the same goals (with panoramas, see Episode End);
         batches give ``float32`` arrays of the batch shape, as SB3's ``HerReplayBuffer`` expects.
+        Defined with ``observation_format="dict"`` only: tools such as SB3's ``check_env`` take an
+        env with ``compute_reward`` for a goal env, which needs ``Dict`` observations. On the flat
+        format the same reward is ``-(not compute_terminated(...))``.
         """
         done = self.compute_terminated(achieved_goal, desired_goal, info)
         if isinstance(done, bool):

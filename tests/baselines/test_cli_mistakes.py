@@ -50,7 +50,7 @@ def test_evaluate_refuses_more_agents_than_fit_before_loading_anything(tmp_path,
     err = _err(capsys)
     assert "--agents 5000" in err and "graph nodes" in err
     assert main(["evaluate", "--agents", "900", "--nodes", "1000", "--out", str(out)]) == 2
-    assert "--agents 900: could not place 900 starts" in _err(capsys)
+    assert "--agents 900: n_agents=900 cannot fit" in _err(capsys)
     assert not out.exists()
 
 

@@ -1,4 +1,6 @@
 """observation_format="flat": one Box per observation, for SuperSuit and SB3's Mlp/Cnn policies."""
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -7,6 +9,7 @@ import torch
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from pettingzoo.test import parallel_api_test
 from stable_baselines3 import PPO
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
 
 import safe_mapf_envs
@@ -31,10 +34,13 @@ def test_flat_vector_observation_is_observation_then_goal():
     for f, d in zip(_rollout(flat), _rollout(gym.make("SafeCentralObstacle-v0"))):
         assert f.dtype == np.float32 and flat.observation_space.contains(f)
         assert np.array_equal(f, np.concatenate([d["observation"], d["desired_goal"]]))
-    # the goal methods still take the Dict's goals
+    # the goal methods still take the Dict's goals; compute_reward is the Dict format's alone
     goal_space = flat.unwrapped.goal_observation_space
     assert goal_space["desired_goal"].shape == (2,)
-    assert flat.unwrapped.compute_reward(f[:2], f[2:], {}) in (0.0, -1.0)
+    assert flat.unwrapped.compute_terminated(f[:2], f[2:], {}) in (True, False)
+    assert not hasattr(flat.unwrapped, "compute_reward")
+    with pytest.raises(AttributeError, match="observation_format='dict' only"):
+        flat.unwrapped.compute_reward(f[:2], f[2:], {})
 
 
 def test_flat_panorama_is_a_channel_first_image_of_the_views_and_the_goal_views():
@@ -105,3 +111,20 @@ def test_bad_observation_format_names_the_value():
         gym.make("SafeCentralObstacle-v0", observation_format="flattened")
     with pytest.raises(ValueError, match="observation_format"):
         safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", observation_format=None)
+
+
+@pytest.mark.parametrize("env_id", ["SafeCentralObstacle-v0", "SafeApartment0-v0"])
+def test_sb3_check_env_passes_on_the_flat_format_wrapped_or_not(env_id):
+    """The flat env has no compute_reward, so SB3 checks it as a plain env (no goal-env rules)."""
+    for env in (gym.make(env_id, observation_format="flat"), gym.make(env_id, observation_format="flat").unwrapped):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            sb3_check_env(env, warn=True)
+    # the Dict format is still a goal env to SB3, checked unwrapped (the wrappers do not forward compute_reward)
+    goal_env = gym.make(env_id).unwrapped
+    assert hasattr(goal_env, "compute_reward")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SB3 advises flattening the panorama Dict's image keys
+        sb3_check_env(goal_env, warn=True)
+    with pytest.raises(AttributeError, match="compute_reward"):
+        sb3_check_env(gym.make(env_id), warn=False)

@@ -87,6 +87,11 @@ def test_render(n, monkeypatch):
 
 def test_every_single_agent_map_has_a_module():
     assert set(VECTOR_IDS) <= set(multi.MODULES)
+    # the apartments too: every registered id but the panorama view of a grid map
+    assert set(multi.MODULES) == {s.id for s in safe_mapf_envs.ENV_SPECS} - {"SafeCentralObstacleVisual-v0"}
+    from safe_mapf_envs.multi import apartment0_v0
+
+    assert apartment0_v0.parallel_env(n_agents=2).obs_type == "panorama"
     for env_id, mod in multi.MODULES.items():
         env = mod.parallel_env(n_agents=2)
         assert env.scenario.layout.name == safe_mapf_envs.env_spec(env_id).layout
@@ -206,9 +211,8 @@ def test_sampled_starts_and_goals_keep_their_distance():
             assert env.scenario.is_free(p).all()
             d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(50) * 1e9
             assert d.min() >= 2.5
-    crowded = safe_mapf_envs.parallel_env("SafeCenterDot-v0", n_agents=200)
-    with pytest.raises(ValueError, match="could not place 200 starts"):
-        crowded.reset(seed=0)
+    with pytest.raises(ValueError, match="n_agents=200 cannot fit on CenterDot: its capacity is 59 agents"):
+        safe_mapf_envs.parallel_env("SafeCenterDot-v0", n_agents=200)
 
 
 def test_goal_distance_band_and_low_cost_starts():
