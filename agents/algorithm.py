@@ -47,7 +47,7 @@ from .actor import GoalActor
 from .augmentation import RandomShift
 from .buffers import GoalCostReplayBuffer, GoalCostSamples, check_goal_space
 from .callbacks import progress_bar_callback
-from .checkpoints import CheckpointError, check_checkpoint
+from .checkpoints import CheckpointError, read_checkpoint
 from .critics import CategoricalCritic
 from .distributional import categorical_projection, shift_distance_target
 from .heads import aggregate_ensemble
@@ -555,8 +555,10 @@ class SafeGoalTD3(OffPolicyAlgorithm):
           multiplier from these, the missing ones taken from the stored multiplier
           (``lagrange_init`` from its current value).
 
-        A corrupt, incomplete or mismatched file raises :class:`CheckpointError`; an unknown
-        override raises ``TypeError``.
+        Nothing the file supplies is unpickled (see :mod:`agents.checkpoints`): its serialized
+        entries are rebuilt from what is known, its tensors are read weights-only and must be
+        finite. A corrupt, incomplete, unsafe or mismatched file raises :class:`CheckpointError`
+        naming the file and the entry; an unknown override raises ``TypeError``.
         """
         overrides = dict(overrides)
         unknown = sorted(set(overrides) - set(_load_overrides()))
@@ -564,9 +566,12 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             raise TypeError(f"{cls.__name__}.load got unknown overrides {unknown}; "
                             f"accepted: {sorted(_load_overrides())}")
         lagrange = {k: overrides.pop(k) for k in _LAGRANGE_OVERRIDES if k in overrides}
-        name = check_checkpoint(path, device=device, custom_objects=custom_objects, owner=cls.__name__)
+        archive = read_checkpoint(path, custom_objects=custom_objects, owner=cls.__name__, env=env,
+                                  provided=list(overrides))
+        name = archive.name
         try:
-            model = super().load(path, env=env, device=device, custom_objects=custom_objects,
+            # the very bytes checked, with every serialized entry replaced: nothing is unpickled
+            model = super().load(archive.stream(), env=env, device=device, custom_objects=archive.custom_objects,
                                  print_system_info=print_system_info, force_reset=force_reset, **overrides)
         except ValueError as exc:
             if "spaces do not match" in str(exc) or "do not match" in str(exc):

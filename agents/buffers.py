@@ -213,15 +213,27 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         os.replace(tmp, path)
 
     def load_arrays(self, path: str) -> None:
-        """Restore transitions written by :meth:`save_arrays` (``ValueError`` if they do not fit)."""
+        """Restore transitions written by :meth:`save_arrays` (``ValueError`` naming ``path`` if the
+        file is missing, truncated or corrupt, holds non-finite values, or does not fit). The file
+        is read whole, without pickle, before anything is restored."""
         try:
-            data = np.load(path)
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: np.asarray(z[k]) for k in z.files}
             pos, full, size, n_envs = (int(v) for v in data["meta"])
         except Exception as exc:  # noqa: BLE001 (a corrupt file of any kind)
             raise ValueError(f"{path} is not a readable replay-buffer file: {exc}") from exc
+        for k, arr in data.items():
+            if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+                raise ValueError(f"{path}: its array {k!r} holds non-finite values (NaN or infinity)")
         if size != self.buffer_size or n_envs != self.n_envs:
             raise ValueError(f"{path} holds a buffer of {size} x {n_envs} transitions, this one is "
                              f"{self.buffer_size} x {self.n_envs}")
+        needed = [f"{prefix}/{k}" for prefix, store in (("obs", self.observations),
+                                                        ("next_obs", self.next_observations))
+                  for k in store if not (k == "achieved_goal" and self.achieved_goal_is_observation)]
+        missing = [k for k in needed + list(self._STATE) if k not in data]
+        if missing:
+            raise ValueError(f"{path} is not a complete replay-buffer file: it lacks {missing}")
         n = size if full else pos
         for prefix, store in (("obs", self.observations), ("next_obs", self.next_observations)):
             for k, v in store.items():

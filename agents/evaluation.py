@@ -176,11 +176,13 @@ class PeriodicEvaluation(BaseCallback):
         save_path: if given, the model is saved there (``.zip``) after each evaluation.
         log_path: if given, one JSON line per evaluation is appended there.
         eval_kwargs: keyword arguments of :func:`evaluate_agent`.
+        wall_offset, cpu_offset: seconds the run took before this callback started (a resumed
+            run's earlier parts), added to the logged ``wall_s`` and ``cpu_s``.
     """
 
     def __init__(self, env_id: str, eval_freq: int = 10_000, save_path: Optional[str] = None,
                  log_path: Optional[str] = None, eval_kwargs: Optional[Dict[str, Any]] = None,
-                 verbose: int = 1) -> None:
+                 verbose: int = 1, wall_offset: float = 0.0, cpu_offset: float = 0.0) -> None:
         super().__init__(verbose)
         if eval_freq < 1:
             raise ValueError(f"eval_freq must be >= 1, got {eval_freq}")
@@ -192,8 +194,8 @@ class PeriodicEvaluation(BaseCallback):
         self.history: List[Dict[str, float]] = []
         self._env: Optional[gym.Env] = None
         self._last = 0
-        self._t0 = time.time()
-        self._cpu0 = time.process_time()
+        self._t0 = time.time() - float(wall_offset)
+        self._cpu0 = time.process_time() - float(cpu_offset)
 
     def _on_training_start(self) -> None:
         self._env = _make_env(self.env_id)
@@ -223,8 +225,11 @@ class PeriodicEvaluation(BaseCallback):
             os.makedirs(os.path.dirname(os.path.abspath(self.log_path)), exist_ok=True)
             with open(self.log_path, "a") as f:
                 f.write(json.dumps(metrics) + "\n")
-        if self.save_path:
-            self.model.save(self.save_path)
+        if self.save_path:  # whole or not at all: a temporary file, then a rename
+            folder, name = os.path.split(self.save_path)
+            tmp = os.path.join(folder, f".{name}.tmp.zip")
+            self.model.save(tmp)
+            os.replace(tmp, self.save_path)
         return metrics
 
 

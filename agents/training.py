@@ -23,6 +23,8 @@ from typing import Any, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
+from .run_folder import RunFolder, read_json, read_json_lines, write_atomic, write_json_atomic
+
 STAGES = ("unconstrained", "constrained")
 
 
@@ -132,7 +134,10 @@ class TrainConfig:
     threads: int = 1
     """torch threads"""
     resume: bool = False
-    """continue the run in out_dir from its last checkpoint (model, replay buffer, evaluations)"""
+    """continue the run in out_dir from its last resume point (model, replay buffer, evaluations); the
+    settings must be the run's own (see RESUMABLE_SETTINGS)"""
+    overwrite: bool = False
+    """start anew in an out_dir that holds an earlier run: its files (TRAIN_OUTPUTS) are removed first"""
     replay_save_freq: Optional[int] = None
     """environment steps between saves of the replay buffer for resuming (default: eval_freq;
     0: never)"""
@@ -188,6 +193,10 @@ class TrainConfig:
         lo, hi = default_eval_distances(self.env_id)
         return (self.eval_max_distance if self.eval_max_distance is not None else lo,
                 self.eval_pair_max_distance if self.eval_pair_max_distance is not None else hi)
+
+    def resolved_replay_save_freq(self) -> int:
+        """Steps between resume points (0: none)."""
+        return self.eval_freq if self.replay_save_freq is None else int(self.replay_save_freq)
 
     def resolved_out_dir(self) -> str:
         return self.out_dir or os.path.join("runs", f"{self.env_id.split(':')[-1]}-{self.stage}-s{self.seed}")
@@ -315,40 +324,62 @@ def _versions() -> Dict[str, str]:
 
 
 class ResumeCheckpoint:
-    """Everything a run needs to continue after an interruption, in ``<out_dir>/resume/``:
-    ``model.zip`` (networks, optimisers, multiplier, step counter), ``replay.npz`` (the replay
-    buffer's filled part) and ``state.json`` (wall and CPU time so far). Written every ``freq``
-    environment steps, each file replaced atomically."""
+    """Everything a run needs to continue after an interruption, in ``<out_dir>/resume/``: the
+    model (networks, optimisers, multiplier, step counter), the replay buffer's filled part and
+    ``state.json`` (the step of the resume point, wall and CPU time so far).
+
+    Written every ``freq`` environment steps. The model and buffer files of a resume point carry
+    its step in their names and ``state.json`` is replaced last, atomically: a run killed at any
+    moment leaves ``state.json`` naming a complete resume point."""
 
     def __init__(self, out_dir: str) -> None:
         self.dir = os.path.join(out_dir, "resume")
 
+    def _state_path(self) -> str:
+        return os.path.join(self.dir, "state.json")
+
     def exists(self) -> bool:
-        return os.path.exists(os.path.join(self.dir, "model.zip"))
+        return os.path.exists(self._state_path())
 
     def save(self, model: Any, wall_s: float, cpu_s: float, replay: bool = True) -> None:
         os.makedirs(self.dir, exist_ok=True)
-        tmp = os.path.join(self.dir, "model.tmp.zip")
+        step = int(model.num_timesteps)
+        model_name, replay_name = f"model-{step}.zip", f"replay-{step}.npz"
+        tmp = os.path.join(self.dir, f".model-{step}.tmp.zip")
         model.save(tmp)
+        os.replace(tmp, os.path.join(self.dir, model_name))
         if replay:
-            model.replay_buffer.save_arrays(os.path.join(self.dir, "replay.npz"))
-        os.replace(tmp, os.path.join(self.dir, "model.zip"))
-        state = {"timesteps": int(model.num_timesteps), "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
-                 "replay": bool(replay)}
-        with open(os.path.join(self.dir, "state.json.tmp"), "w") as f:
-            json.dump(state, f)
-        os.replace(os.path.join(self.dir, "state.json.tmp"), os.path.join(self.dir, "state.json"))
+            model.replay_buffer.save_arrays(os.path.join(self.dir, replay_name))
+        state = {"timesteps": step, "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
+                 "gradient_steps": int(model._n_updates), "model": model_name,
+                 "replay": replay_name if replay else None}
+        write_json_atomic(self._state_path(), state)
+        for name in os.listdir(self.dir):  # the files of earlier resume points
+            if name not in (model_name, replay_name, "state.json") and not name.startswith("."):
+                os.remove(os.path.join(self.dir, name))
+
+    def state(self) -> Dict[str, Any]:
+        """The saved state (``ValueError`` naming the file if it is unreadable or incomplete)."""
+        state = read_json(self._state_path(), what="resume state")
+        if isinstance(state, dict) and "model" not in state and isinstance(state.get("replay"), bool):
+            state["model"] = "model.zip"  # a resume point written with fixed file names
+            state["replay"] = "replay.npz" if state["replay"] else None
+        if not isinstance(state, dict) or not {"timesteps", "wall_s", "cpu_s", "model"} <= set(state):
+            raise ValueError(f"resume state {self._state_path()!r} lacks timesteps, wall_s, cpu_s or model")
+        for key in ("model", "replay"):
+            name = state.get(key)
+            if name is not None and not os.path.exists(os.path.join(self.dir, name)):
+                raise ValueError(f"resume state {self._state_path()!r} names {name}, which is not in {self.dir!r}")
+        return state
 
     def load(self, cfg: "TrainConfig"):
         """The saved model (with its replay buffer) set up for ``cfg``, and the saved state."""
         from .algorithm import SafeGoalTD3
 
-        with open(os.path.join(self.dir, "state.json")) as f:
-            state = json.load(f)
-        model = SafeGoalTD3.load(os.path.join(self.dir, "model.zip"), env=make_training_env(cfg), device="cpu")
-        replay = os.path.join(self.dir, "replay.npz")
-        if state.get("replay") and os.path.exists(replay):
-            model.replay_buffer.load_arrays(replay)
+        state = self.state()
+        model = SafeGoalTD3.load(os.path.join(self.dir, state["model"]), env=make_training_env(cfg), device="cpu")
+        if state.get("replay"):
+            model.replay_buffer.load_arrays(os.path.join(self.dir, state["replay"]))
         return model, state
 
 
@@ -362,10 +393,14 @@ def _make_callbacks(cfg: "TrainConfig", out: str, eval_log: str, resume: ResumeC
     evaluation = PeriodicEvaluation(
         cfg.env_id, eval_freq=cfg.eval_freq, save_path=os.path.join(out, "checkpoint.zip"), log_path=eval_log,
         eval_kwargs=dict(n_problems=cfg.eval_problems, max_distance=max_d, n_pairs=cfg.eval_pairs,
-                         pair_max_distance=pair_d, seed=cfg.eval_seed), verbose=1)
-    freq = cfg.eval_freq if cfg.replay_save_freq is None else int(cfg.replay_save_freq)
+                         pair_max_distance=pair_d, seed=cfg.eval_seed), verbose=1,
+        wall_offset=clock["wall0"], cpu_offset=clock["cpu0"])
+    freq = cfg.resolved_replay_save_freq()
 
     class _Resume(BaseCallback):
+        """Writes a resume point at the start of a rollout, after the gradient steps of the steps before
+        it, so that a resumed run takes every gradient step an uninterrupted one takes."""
+
         def __init__(self) -> None:
             super().__init__()
             self._last = 0
@@ -373,37 +408,76 @@ def _make_callbacks(cfg: "TrainConfig", out: str, eval_log: str, resume: ResumeC
         def _on_training_start(self) -> None:
             self._last = self.num_timesteps
 
-        def _on_step(self) -> bool:
+        def _on_rollout_start(self) -> None:
             if freq > 0 and self.num_timesteps - self._last >= freq:
                 self._last = self.num_timesteps
                 resume.save(self.model, clock["wall0"] + time.time() - clock["t0"],
                             clock["cpu0"] + time.process_time() - clock["c0"])
+
+        def _on_step(self) -> bool:
             return True
 
     return evaluation, [evaluation, _Resume()]
 
 
+#: what ``train_stage`` writes into its folder (``overwrite`` removes these, and only these)
+TRAIN_OUTPUTS = ("model.zip", "checkpoint.zip", "config.json", "evaluations.jsonl", "summary.json", "resume")
+#: settings a resumed run may change; every other one must be the run's own
+RESUMABLE_SETTINGS = ("timesteps", "out_dir", "resume", "overwrite", "threads", "progress_bar", "tensorboard_log",
+                      "verbose", "replay_save_freq")
+
+
+def _flag(key: str) -> str:
+    """The ``safe-mapf train`` option of a setting, for messages."""
+    return {"env_id": "--env", "out_dir": "--out"}.get(key, "--" + key.replace("_", "-"))
+
+
+def output_folder(cfg: TrainConfig) -> RunFolder:
+    """The run's output folder (see :class:`~agents.run_folder.RunFolder`)."""
+    return RunFolder(cfg.resolved_out_dir(), "safe-mapf train", TRAIN_OUTPUTS, "config.json", settings_key="config")
+
+
+def check_run(cfg: TrainConfig) -> None:
+    """Every check of a stage before any work or any file is written: the settings, the ``init``
+    checkpoint, and what the output folder allows (see ``resume`` and ``overwrite``)."""
+    cfg.validate()
+    if cfg.init:
+        from .checkpoints import check_checkpoint
+
+        check_checkpoint(cfg.init)
+    folder = output_folder(cfg)
+    folder.check(_settings(cfg), resume=cfg.resume, overwrite=cfg.overwrite, may_differ=RESUMABLE_SETTINGS,
+                 describe=_flag)
+    if cfg.resume:
+        point = ResumeCheckpoint(cfg.resolved_out_dir())
+        if not point.exists():
+            raise ValueError(f"nothing to resume in {cfg.resolved_out_dir()!r}: no resume point (resume/state.json, "
+                             "written every replay_save_freq steps)")
+        point.state()  # whole and readable
+
+
+def _settings(cfg: TrainConfig) -> Dict[str, Any]:
+    return dataclasses.asdict(cfg)
+
+
 def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[str, Any]:
     """Run one stage and write its files (see the module docstring); return the summary.
 
-    With ``cfg.resume`` the run continues from ``<out_dir>/resume/`` (written every
-    ``replay_save_freq`` steps) up to ``cfg.timesteps`` steps in all; the evaluation log is
-    kept and the summary's wall and CPU times cover every part of the run.
+    A folder that holds files is refused unless ``cfg.resume`` (continue the run in it, from the
+    resume point written every ``replay_save_freq`` steps, up to ``cfg.timesteps`` steps in all;
+    the settings must be the run's own, :data:`RESUMABLE_SETTINGS` aside) or ``cfg.overwrite``
+    (remove what an earlier run wrote, :data:`TRAIN_OUTPUTS`). A resumed run keeps the evaluation
+    log, and its wall and CPU times and step counts cover every part of the run.
     """
     import torch
 
-    cfg.validate()
+    check_run(cfg)
     torch.set_num_threads(cfg.threads)
     out = cfg.resolved_out_dir()
-    os.makedirs(out, exist_ok=True)
     resume = ResumeCheckpoint(out)
-    if cfg.resume and not resume.exists():
-        raise FileNotFoundError(f"nothing to resume in {out!r}: no resume/model.zip (a run writes it every "
-                                f"replay_save_freq steps)")
-    config = {"config": dataclasses.asdict(cfg), "command": command if command is not None else sys.argv,
-              "versions": _versions()}
-    with open(os.path.join(out, "config.json" if not cfg.resume else "config.resume.json"), "w") as f:
-        json.dump(config, f, indent=2)
+    extra = {"command": command if command is not None else sys.argv, "versions": _versions()}
+    output_folder(cfg).prepare(_settings(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
+                               may_differ=RESUMABLE_SETTINGS, describe=_flag, extra=extra)
     eval_log = os.path.join(out, "evaluations.jsonl")
 
     clock = {"t0": time.time(), "c0": time.process_time(), "wall0": 0.0, "cpu0": 0.0}
@@ -411,13 +485,9 @@ def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[s
         model, state = resume.load(cfg)
         clock["wall0"], clock["cpu0"] = float(state["wall_s"]), float(state["cpu_s"])
         if os.path.exists(eval_log):  # drop evaluations made after the resume point
-            with open(eval_log) as f:
-                kept = [line for line in f if line.strip() and json.loads(line)["timesteps"] <= model.num_timesteps]
-            with open(eval_log, "w") as f:
-                f.writelines(kept)
+            kept = [r for r in read_json_lines(eval_log) if r.get("timesteps", 0) <= model.num_timesteps]
+            write_atomic(eval_log, "".join(json.dumps(r) + "\n" for r in kept))
     else:
-        if os.path.exists(eval_log):
-            os.remove(eval_log)
         model = build_model(cfg)
     evaluation, callbacks = _make_callbacks(cfg, out, eval_log, resume, clock)
     remaining = cfg.timesteps - int(model.num_timesteps) if cfg.resume else cfg.timesteps
@@ -426,20 +496,24 @@ def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[s
                     tb_log_name=f"{cfg.stage}-s{cfg.seed}", reset_num_timesteps=not cfg.resume)
     train_wall = clock["wall0"] + time.time() - clock["t0"]
     train_cpu = clock["cpu0"] + time.process_time() - clock["c0"]
+    if cfg.resolved_replay_save_freq() > 0 and remaining > 0:  # the end is a resume point too: a run may go on
+        resume.save(model, train_wall, train_cpu)
     if evaluation.history and evaluation.history[-1]["timesteps"] == model.num_timesteps:
         final = evaluation.history[-1]
     else:
         final = evaluation.evaluate()
     model_path = os.path.join(out, "model.zip")
-    model.save(model_path)
+    tmp = os.path.join(out, ".model.tmp.zip")
+    model.save(tmp)
+    os.replace(tmp, model_path)
     summary = {
         "env_id": cfg.env_id, "stage": cfg.stage, "seed": cfg.seed, "timesteps": int(model.num_timesteps),
         "gradient_steps": int(model._n_updates), "wall_s": round(train_wall, 1), "cpu_s": round(train_cpu, 1),
         "lagrange_multiplier": model.lagrange_multiplier, "final_evaluation": final, "model": model_path,
     }
-    with open(os.path.join(out, "summary.json"), "w") as f:
-        json.dump(summary, f, indent=2)
+    write_json_atomic(os.path.join(out, "summary.json"), summary)
     return summary
 
 
-__all__ = ["STAGES", "ResumeCheckpoint", "TrainConfig", "build_model", "default_eval_distances", "train_stage"]
+__all__ = ["RESUMABLE_SETTINGS", "STAGES", "TRAIN_OUTPUTS", "ResumeCheckpoint", "TrainConfig", "build_model",
+           "check_run", "default_eval_distances", "output_folder", "train_stage"]

@@ -66,12 +66,39 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def resume_command(argv: Sequence[str]) -> str:
+    """The command line that continues a run started with ``argv`` (the arguments after
+    ``safe-mapf``): ``--overwrite`` left out, ``--resume`` added."""
+    import shlex
+
+    tokens = [t for t in argv if t != "--overwrite"]
+    return shlex.join(["safe-mapf", *tokens, *([] if "--resume" in tokens else ["--resume"])])
+
+
+#: the exit code of a command stopped by Ctrl-C (128 + SIGINT), as shells report it
+INTERRUPTED = 130
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``safe-mapf`` console script."""
+    """Entry point of the ``safe-mapf`` console script.
+
+    Refused input exits with code 2 and one line naming the problem. Ctrl-C exits with code 130
+    and one line saying what was kept and, for commands that resume, the command that continues
+    the run (a command sets ``args.interrupt_note``, a function that returns that line)."""
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
+    args.argv = argv
     try:
         return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        note = getattr(args, "interrupt_note", None)
+        try:
+            text = note() if callable(note) else "nothing was kept"
+        except Exception:  # noqa: BLE001 (a note that cannot be made must not hide the interruption)
+            text = "interrupted"
+        print(f"\nsafe-mapf {args.command}: interrupted; {text}", file=sys.stderr)
+        return INTERRUPTED
     except BrokenPipeError:  # the reader went away (e.g. `safe-mapf envs --json | head`): stop quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # so that flushing stdout at exit does not fail again

@@ -19,11 +19,10 @@ rows; :func:`aggregate` and :func:`markdown_table` turn them into the paper's Ta
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Optional, Sequence
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -76,7 +75,6 @@ class EvaluationSetup:
     d_max: float = 7.0
     proximity_radius: float = 1.5
     suboptimality: float = 1.1
-    cbs_time_limit: float = 30.0  # a safety net: the planner stops on its expansion budget first
     min_separation: float = 2.5
     max_edges: Optional[int] = None
     shortest: np.ndarray = field(init=False, repr=False)
@@ -87,7 +85,7 @@ class EvaluationSetup:
         self.planner = BufferPlanner(
             self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
             d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
-            time_limit=self.cbs_time_limit, max_edges=self.max_edges, detour=default_detour(unc),
+            max_edges=self.max_edges, detour=default_detour(unc),
             second_opinion=default_second_opinion(unc, self.models.get("constrained")))
         # problem difficulty: shortest predicted distances on the planner's own buffer graph
         self.shortest = dijkstra(self.planner.buffer_graph.distance, directed=True)
@@ -177,12 +175,48 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
             if len(s_ids) == n_agents:
                 break
         else:
-            raise ValueError(f"could not place {n_agents} agents for a {difficulty} problem "
+            article = "an" if difficulty[:1] in "aeiou" else "a"
+            raise ValueError(f"could not place {n_agents} agent{'s' if n_agents != 1 else ''} for {article} "
+                             f"{difficulty} problem "
                                f"(target {target:.1f}); use fewer agents or more graph nodes")
         s_ids, g_ids = np.array(s_ids), np.array(g_ids)
         problems.append(Problem(difficulty, p, target, s_ids, g_ids, pos[s_ids].copy(), pos[g_ids].copy(),
                                 sp[s_ids, g_ids]))
     return problems
+
+
+def placeable_agents(env_id: str, n_agents: int, n_nodes: int = 1000, seed: int = 0,
+                     min_separation: Optional[float] = None, attempts: int = 200) -> Tuple[int, float]:
+    """How many agents' starts a placement like :func:`make_problems`' puts on the graph nodes
+    :meth:`EvaluationSetup.build` draws with ``seed``, ``min_separation`` apart (the setup's
+    default), read from the nodes' positions alone, before any critic query: the most of up to
+    ``attempts`` random greedy placements, stopping at ``n_agents``. The problems keep more
+    constraints (difficulty, proximity), so a count this placement does not reach is out of
+    reach for them too. Returns ``(count, min_separation)``."""
+    import gymnasium as gym
+
+    import safe_mapf_envs
+
+    if min_separation is None:
+        penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
+        min_separation = 1.25 * penv.min_separation
+        penv.close()
+    env = gym.make(env_id)
+    pos = np.asarray(env.unwrapped.sample_states(n_nodes, np.random.default_rng(seed)))[:, :2]
+    env.close()
+    far = np.linalg.norm(pos[:, None] - pos[None], axis=-1) >= float(min_separation)
+    rng = np.random.default_rng([seed, n_agents])
+    best = 0
+    for _ in range(attempts):
+        free = np.ones(len(pos), dtype=bool)
+        placed = 0
+        while placed < n_agents and free.any():
+            free &= far[int(rng.choice(np.flatnonzero(free)))]
+            placed += 1
+        best = max(best, placed)
+        if best >= n_agents:
+            break
+    return best, float(min_separation)
 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
@@ -264,6 +298,7 @@ def evaluate(
     desc: str = "evaluate",
     ray: Optional[str] = None,
     memories: Optional[Dict[str, EdgeMemory]] = None,
+    kept: Sequence[Dict[str, Any]] = (),
 ) -> List[Dict[str, Any]]:
     """Run every method on the same problems; one row per (method, agents, difficulty, problem).
 
@@ -280,6 +315,10 @@ def evaluate(
     ``memories`` gives search methods (by name) the edge memory their graph learned before
     (:func:`learn_edge_memory`); every run plans with a frozen copy of it, so that no run learns
     from the test problems and the rows do not depend on the order of the runs.
+
+    ``kept``: rows of an interrupted evaluation with the same arguments (the first rows, in order,
+    as :class:`~baselines.output.RowWriter` wrote them); their runs are not run again, and they
+    open the returned rows (``on_run`` is called for the new runs only).
     """
     import safe_mapf_envs
 
@@ -292,13 +331,14 @@ def evaluate(
     for k, d in cells:
         problems = make_problems(setup, d, k, n_problems, seed=seed)
         tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
+    tasks = tasks[check_kept_rows(kept, tasks):]
     frozen = {name: m.frozen_copy() for name, m in (memories or {}).items()}
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(tasks), desc=desc, unit="run", mininterval=2.0)
-    rows: List[Dict[str, Any]] = []
+        bar = tqdm(total=len(tasks) + len(kept), initial=len(kept), desc=desc, unit="run", mininterval=2.0)
+    rows: List[Dict[str, Any]] = list(kept)
 
     def done(row, prob, ex) -> None:
         rows.append(row)
@@ -329,6 +369,28 @@ def evaluate(
     if bar is not None:
         bar.close()
     return rows
+
+
+def check_kept_rows(kept: Sequence[Dict[str, Any]], tasks: Sequence[Tuple[Method, Problem]],
+                    with_c_max: bool = False) -> int:
+    """How many of ``tasks`` (``(method, problem)``, in order) the ``kept`` rows of an interrupted
+    evaluation already ran; ``ValueError`` unless they are the rows of the first tasks, in order
+    (``with_c_max``: the methods' ``c_max`` tells their rows apart too)."""
+    def key(m: Method, p: Problem) -> tuple:
+        c_max = float(m.c_max) if m.search else math.inf  # as the rows have it
+        return (m.name, p.n_agents, p.difficulty, p.index) + ((c_max,) if with_c_max else ())
+
+    for j, row in enumerate(kept):
+        try:
+            got = (row["method"], int(row["agents"]), row["difficulty"], int(row["problem"])) + (
+                (float(row["c_max"]),) if with_c_max else ())
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"kept row {j + 1} lacks method, agents, difficulty, problem or c_max: {row}") from None
+        if j >= len(tasks) or got != key(*tasks[j]):
+            want = key(*tasks[j]) if j < len(tasks) else "no run"
+            raise ValueError(f"kept row {j + 1} is the run {got}, where this evaluation's run {j + 1} is {want}: the "
+                             "rows come from an evaluation with other settings")
+    return len(kept)
 
 
 def learn_edge_memory(
@@ -547,16 +609,12 @@ def _percent(x: float) -> str:
 
 
 def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
-    """Write rows (per run or aggregated) as CSV with a header."""
-    rows = list(rows)
+    """Write rows (per run or aggregated) as CSV with a header, whole or not at all."""
+    from .output import write_rows_atomic
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        if not rows:
-            return
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_rows_atomic(rows, path)
 
 
 __all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "REPAIR_SEED_OFFSET",

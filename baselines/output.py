@@ -73,28 +73,57 @@ NUMERIC_FIELDS = ("agents", "problem", "cost_max", "cost_mean", "collisions", "s
 def read_rows(path: Union[str, os.PathLike]) -> List[Dict[str, Any]]:
     """The rows of a ``runs.csv`` of ``safe-mapf evaluate``, with numbers (integers as written)
     and ``success`` parsed; empty fields stay empty strings."""
-    rows = []
     with open(path, newline="") as f:
-        for r in csv.DictReader(f):
-            r = dict(r)
-            for k in NUMERIC_FIELDS:
-                v = r.get(k)
-                if v not in (None, ""):
-                    r[k] = int(v) if v.lstrip("-").isdigit() else float(v)
-            r["success"] = r["success"] in ("True", "true", "1")
-            rows.append(r)
-    return rows
+        return [parse_row(r) for r in csv.DictReader(f)]
+
+
+def read_kept_rows(path: Union[str, os.PathLike]) -> List[Dict[str, str]]:
+    """The complete rows of a CSV file that rows were appended to as they came (:class:`RowWriter`),
+    as written (strings): a last line cut off by an interruption (no line end, or fewer fields than
+    the header) is left out. A missing or empty file has none."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{str(path)!r} is not a text file") from None
+    if not text.endswith("\n"):
+        text = text[:text.rfind("\n") + 1]
+    rows = list(csv.DictReader(text.splitlines(keepends=True)))
+    return [r for r in rows if None not in r.values() and None not in r]
+
+
+def write_rows_atomic(rows: Sequence[Dict[str, Any]], path: Union[str, os.PathLike],
+                      fields: Optional[Sequence[str]] = None) -> None:
+    """Write ``rows`` as CSV with a header, whole or not at all (nothing, not even a header, for no
+    rows unless ``fields`` are given)."""
+    import io
+
+    from agents.run_folder import write_atomic
+
+    rows = list(rows)
+    names = list(fields) if fields is not None else (list(rows[0]) if rows else [])
+    buf = io.StringIO(newline="")
+    if names:
+        w = csv.DictWriter(buf, fieldnames=names, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    write_atomic(path, buf.getvalue())
 
 
 class RowWriter:
     """Append rows (dicts) to a CSV file as they come; the header is the first row's keys.
 
-    The file is started anew on the first row and flushed after every row.
+    The file is started anew on the first row (``append``: rows go after those already in the
+    file, which keeps its header) and flushed after every row.
     """
 
-    def __init__(self, path: Union[str, os.PathLike], fields: Optional[Sequence[str]] = None) -> None:
+    def __init__(self, path: Union[str, os.PathLike], fields: Optional[Sequence[str]] = None,
+                 append: bool = False) -> None:
         self.path = Path(path)
         self.fields = list(fields) if fields is not None else None
+        self.append = append
         self._file: Any = None
         self._writer: Optional[csv.DictWriter] = None
         self.count = 0
@@ -102,10 +131,15 @@ class RowWriter:
     def write(self, row: Dict[str, Any]) -> None:
         """Write one row (the file is created with the header on the first)."""
         if self._writer is None:
-            self.fields = self.fields or list(row)
-            self._file = open(self.path, "w", newline="")
+            header = None
+            if self.append and self.path.exists() and self.path.stat().st_size:
+                with open(self.path, newline="") as f:
+                    header = next(csv.reader(f), None)
+            self.fields = header or self.fields or list(row)
+            self._file = open(self.path, "a" if header else "w", newline="")
             self._writer = csv.DictWriter(self._file, fieldnames=self.fields, extrasaction="ignore")
-            self._writer.writeheader()
+            if not header:
+                self._writer.writeheader()
         self._writer.writerow(row)
         self._file.flush()
         self.count += 1
@@ -123,5 +157,18 @@ class RowWriter:
         self.close()
 
 
+def parse_row(r: Dict[str, Any]) -> Dict[str, Any]:
+    """A row of ``runs.csv`` as read (strings) with numbers (integers as written) and ``success``
+    parsed; empty fields stay empty strings."""
+    r = dict(r)
+    for k in NUMERIC_FIELDS:
+        v = r.get(k)
+        if isinstance(v, str) and v != "":
+            r[k] = int(v) if v.lstrip("-").isdigit() else float(v)
+    if isinstance(r.get("success"), str):
+        r["success"] = r["success"] in ("True", "true", "1")
+    return r
+
+
 __all__ = ["FIGURES_OUT", "NUMERIC_FIELDS", "RowWriter", "add_figure_output_arguments", "check_output_dir",
-           "figure_output_dir", "read_rows"]
+           "figure_output_dir", "parse_row", "read_kept_rows", "read_rows", "write_rows_atomic"]

@@ -46,7 +46,9 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .evaluation import DIFFICULTIES, Problem, aggregate, markdown_table, write_csv
+from agents.run_folder import write_atomic
+
+from .evaluation import DIFFICULTIES, Problem, aggregate, check_kept_rows, markdown_table, write_csv
 from .methods import MARL_METHODS, Method
 
 #: the published code's c_max grid, as factors of the trained cost limit
@@ -324,6 +326,7 @@ def evaluate_paper(
     candidates: int = 1000,
     on_row: Optional[Callable[[Dict[str, Any]], None]] = None,
     ray: Optional[str] = None,
+    kept: Sequence[Dict[str, Any]] = (),
 ) -> List[Dict[str, Any]]:
     """Every method on the same paper-protocol problems; ``ours`` once per c_max of the grid.
 
@@ -332,7 +335,8 @@ def evaluate_paper(
     other; ``planning_time`` is not measured). ``policy_agents`` restricts the methods without
     search to these agent counts (the paper: 1). ``on_row(row)`` is called after each run, in the
     order of the rows (e.g. to write rows as they come). ``ray`` runs the runs as Ray tasks, as
-    :func:`~baselines.evaluation.evaluate` does: the same rows in the same order.
+    :func:`~baselines.evaluation.evaluate` does: the same rows in the same order. ``kept``: the rows
+    of an interrupted evaluation with the same arguments, as in :func:`~baselines.evaluation.evaluate`.
     """
     import safe_mapf_envs
 
@@ -353,12 +357,14 @@ def evaluate_paper(
                     continue
                 variants = [m.with_options(c_max=c) for c in grid] if math.isfinite(m.c_max) else [m]
                 runs += [(v, p) for v in variants for p in problems]
+    runs = runs[check_kept_rows(kept, runs, with_c_max=True):]
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(runs), desc="evaluate (paper protocol)", unit="run", mininterval=2.0)
-    rows: List[Dict[str, Any]] = []
+        bar = tqdm(total=len(runs) + len(kept), initial=len(kept), desc="evaluate (paper protocol)", unit="run",
+                   mininterval=2.0)
+    rows: List[Dict[str, Any]] = list(kept)
 
     def done(row: Dict[str, Any]) -> None:
         rows.append(row)
@@ -442,20 +448,20 @@ def write_paper_outputs(rows: Sequence[Dict[str, Any]], out: Any, methods: Seque
     kept, chosen = choose_best_c_max(rows)
     agg = aggregate(kept)
     write_csv(agg, out / "table.csv")
-    (out / "table.json").write_text(json.dumps(agg, indent=1))
-    (out / "c_max.json").write_text(json.dumps(
+    write_atomic(out / "table.json", json.dumps(agg, indent=1))
+    write_atomic(out / "c_max.json", json.dumps(
         {"chosen_on": "the test problems (the published code's convention)", "cost_limit": cost_limit,
          "grid": list(grid), "targets": targets,
          "chosen": [{"agents": k, "difficulty": d, "c_max": c} for (k, d), c in sorted(chosen.items())]}, indent=1))
     header = (f"{env_id}, the paper's protocol: largest cumulative cost over agents until arrival, mean ± std over "
-              f"successful runs (success rate); {n_problems} problems per cell, seed {seed}, {wall:.0f} s; "
-              f"targets {targets}\n\n")
+              f"successful runs (success rate); {n_problems} problem{'s' if n_problems != 1 else ''} per cell, "
+              f"seed {seed}, {wall:.0f} s; targets {targets}\n\n")
     if chosen:
         cells = ", ".join(f"{d} {k}: {c:g}" for (k, d), c in sorted(chosen.items()))
         listed = ", ".join(f"{c:g}" for c in grid)
         header += f"ours: c_max per cell chosen ON THE TEST PROBLEMS from {listed}: {cells}\n\n"
     text = header + markdown_table(agg, list(methods))
-    (out / "table.md").write_text(text + "\n")
+    write_atomic(out / "table.md", text + "\n")
     return agg, text
 
 

@@ -13,10 +13,22 @@ from typing import Any, Callable, Dict, List, Mapping, Optional
 import numpy as np
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
+from ..run_folder import RunFolder as OutputFolder
+from ..run_folder import read_json, read_json_lines, write_atomic, write_json_atomic
 from .config import MarlConfig
 
 #: file suffix of each algorithm's weights (an SB3 zip for IPPO, a torch file for MAPPO-Lagrangian)
 SUFFIX = {"ippo": ".zip", "mappo-lag": ".pt"}
+#: what a run writes into its folder (``overwrite`` removes these, and only these)
+MARL_OUTPUTS = ("config.json", "evaluations.jsonl", "checkpoint.zip", "checkpoint.pt", "checkpoint.json", "model.zip",
+                "model.pt", "model.json", "summary.json")
+#: settings a resumed run may change; every other one must be the run's own
+RESUMABLE_SETTINGS = ("timesteps", "out_dir", "resume", "overwrite", "threads", "progress_bar", "tensorboard_log")
+
+
+def _flag(key: str) -> str:
+    """The ``safe-mapf train-marl`` option of a setting, for messages."""
+    return {"env_id": "--env", "out_dir": "--out", "n_agents": "--agents"}.get(key, "--" + key.replace("_", "-"))
 
 Act = Callable[[np.ndarray], np.ndarray]
 
@@ -125,7 +137,6 @@ class RunFolder:
         self.command = command
         self.state = self.check(cfg)
         self.start_steps = int(self.state.get("timesteps", 0))
-        self.out.mkdir(parents=True, exist_ok=True)
         self.t0 = time.perf_counter()
         self.cpu0 = time.process_time()
         self.wall_before = float(self.state.get("wall_s", 0.0))
@@ -133,11 +144,16 @@ class RunFolder:
         self.bar: Any = None
         from stable_baselines3.common.logger import Logger, make_output_format
 
+        self.owned(cfg).prepare(asdict(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
+                                may_differ=RESUMABLE_SETTINGS, describe=_flag,
+                                extra={"command": command, "python": platform.python_version(),
+                                       "versions": _versions()})
+        log = self.out / "evaluations.jsonl"
+        if cfg.resume and log.exists():  # keep the evaluations up to the resume point
+            kept = [r for r in read_json_lines(log) if r.get("timesteps", 0) <= self.start_steps]
+            write_atomic(log, "".join(json.dumps(r) + "\n" for r in kept))
         formats = [make_output_format("tensorboard", cfg.tensorboard_log)] if cfg.tensorboard_log else []
         self.logger = Logger(cfg.tensorboard_log, formats)
-        (self.out / "config.json").write_text(json.dumps(
-            {"config": asdict(self.cfg), "command": command, "python": platform.python_version(),
-             "versions": _versions()}, indent=1))
 
     @staticmethod
     def folder(cfg: MarlConfig) -> Path:
@@ -145,20 +161,27 @@ class RunFolder:
         return Path(cfg.out_dir or os.path.join("runs", f"{cfg.env_id}-{cfg.algo}-s{cfg.seed}"))
 
     @classmethod
+    def owned(cls, cfg: MarlConfig) -> OutputFolder:
+        """The folder as :class:`agents.run_folder.RunFolder` sees it (what the run writes, its record)."""
+        return OutputFolder(cls.folder(cfg), "safe-mapf train-marl", MARL_OUTPUTS, "config.json",
+                            settings_key="config")
+
+    @classmethod
     def check(cls, cfg: MarlConfig) -> Dict[str, Any]:
         """The resume point's description with ``cfg.resume`` (``{}`` without); ``ValueError`` if there is
-        none to resume, if it belongs to another run, or if a fresh run would overwrite one."""
+        none to resume, if the folder holds a run with other settings, or if it holds files and neither
+        ``resume`` nor ``overwrite`` is set. Writes nothing."""
         out = cls.folder(cfg)
-        meta = out / "checkpoint.json"
+        cls.owned(cfg).check(asdict(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
+                             may_differ=RESUMABLE_SETTINGS, describe=_flag)
         if not cfg.resume:
-            if meta.exists():
-                raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another --out")
             return {}
+        meta = out / "checkpoint.json"
         if not meta.exists():
             raise ValueError(f"--resume: {out} has no resume point (checkpoint.json); start without --resume")
-        state = json.loads(meta.read_text())
-        if state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
-            raise ValueError(f"--resume: {out} holds a {state.get('algo')} run on {state.get('env_id')}, "
+        state = read_json(meta, what="resume point")
+        if not isinstance(state, dict) or state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
+            raise ValueError(f"--resume: {meta} describes a {state.get('algo')} run on {state.get('env_id')}, "
                              f"not {cfg.algo} on {cfg.env_id}")
         return state
 
@@ -188,6 +211,7 @@ class RunFolder:
         line = {"timesteps": steps, "wall_s": round(self.wall(), 1), **ev, **(extra or {})}
         with open(self.out / "evaluations.jsonl", "a") as f:
             f.write(json.dumps(line) + "\n")
+            f.flush()
         for k, v in line.items():
             self.logger.record(f"eval/{k}", v)
         self.logger.dump(steps)
@@ -201,7 +225,7 @@ class RunFolder:
                 "command": self.command, **(extra or {})}
 
     def save_meta(self, name: str, meta: Dict[str, Any]) -> None:
-        (self.out / f"{name}.json").write_text(json.dumps(meta, indent=1))
+        write_json_atomic(self.out / f"{name}.json", meta, indent=1)
 
     def finish(self, steps: int, obs_dim: int, extra: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """Close the bar and the logger, write ``model.json`` and ``summary.json``; returns the summary."""
@@ -213,7 +237,7 @@ class RunFolder:
         summary = {**{k: meta[k] for k in ("algo", "env_id", "n_agents", "timesteps", "wall_s", "command")},
                    "cpu_s": round(time.process_time() - self.cpu0, 1), "model": str(self.out / f"model{self.suffix}"),
                    "final_evaluation": self.last_eval, **(extra or {})}
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=1))
+        write_json_atomic(self.out / "summary.json", summary, indent=1)
         return summary
 
 

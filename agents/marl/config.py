@@ -68,7 +68,10 @@ class MarlConfig:
     out_dir: Optional[str] = None
     """output folder; default ``runs/<env>-<algo>-s<seed>``"""
     resume: bool = False
-    """continue the run in ``out_dir`` from its last resume point up to ``timesteps``"""
+    """continue the run in ``out_dir`` from its last resume point up to ``timesteps`` (with the run's own
+    settings: see ``RESUMABLE_SETTINGS`` in :mod:`agents.marl.common`)"""
+    overwrite: bool = False
+    """start anew in an ``out_dir`` that holds an earlier run: the files it wrote are removed first"""
     progress_bar: bool = True
     """draw a progress bar"""
     tensorboard_log: Optional[str] = None

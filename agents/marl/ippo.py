@@ -39,7 +39,7 @@ def train_ippo(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
     venv.venv.reset(seed=seed)
     set_random_seed(seed)
     if run.start_steps:
-        model = PPO.load(str(run.checkpoint), env=venv, device="cpu", tensorboard_log=cfg.tensorboard_log)
+        model = load_ppo(str(run.checkpoint), env=venv, tensorboard_log=cfg.tensorboard_log)
     else:
         model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                     learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
@@ -82,11 +82,40 @@ def train_ippo(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
     return run.finish(steps, obs_dim)
 
 
-def load_ippo_act(path: str) -> Act:
-    """The deterministic action function of an IPPO checkpoint."""
+def _ppo_spec():
+    from stable_baselines3.common.buffers import RolloutBuffer  # noqa: F401  (imports the base classes named)
+    from stable_baselines3.common.policies import ActorCriticPolicy  # noqa: F401
+
+    from ..checkpoints import ArchiveSpec, class_rebuilder, schedule_rebuilder
+
+    return ArchiveSpec(
+        owner="IPPO (stable-baselines3 PPO)",
+        policy_base=("stable_baselines3.common.policies", "ActorCriticPolicy"),
+        params=("policy", "policy.optimizer"),
+        rebuilders={"rollout_buffer_class": class_rebuilder(("stable_baselines3.common.buffers", "RolloutBuffer")),
+                    "clip_range": schedule_rebuilder, "clip_range_vf": schedule_rebuilder},
+    )
+
+
+def load_ppo(path: str, env: Any = None, **kwargs: Any):
+    """The stable-baselines3 PPO model saved at ``path``, read without unpickling anything (see
+    :mod:`agents.checkpoints`): a corrupt, truncated, non-finite or unexpected file raises
+    :class:`~agents.checkpoints.CheckpointError` naming the file and the entry."""
     from stable_baselines3 import PPO
 
-    model = PPO.load(path, device="cpu")
+    from ..checkpoints import CheckpointError, read_sb3_archive
+
+    archive = read_sb3_archive(path, _ppo_spec(), env=env, provided=list(kwargs))
+    try:
+        return PPO.load(archive.stream(), env=env, device="cpu", custom_objects=archive.custom_objects, **kwargs)
+    except (ValueError, RuntimeError, KeyError, AssertionError) as exc:
+        if isinstance(exc, CheckpointError):
+            raise
+        raise CheckpointError(f"{archive.name}: not a loadable PPO checkpoint ({type(exc).__name__}: {exc})") from exc
+
+
+def ppo_act(model: Any) -> Act:
+    """The deterministic action function of a PPO model."""
 
     def act(obs: np.ndarray) -> np.ndarray:
         return model.predict(obs, deterministic=True)[0]
@@ -94,4 +123,9 @@ def load_ippo_act(path: str) -> Act:
     return act
 
 
-__all__ = ["load_ippo_act", "make_vec_env", "train_ippo"]
+def load_ippo_act(path: str) -> Act:
+    """The deterministic action function of an IPPO checkpoint (read by :func:`load_ppo`)."""
+    return ppo_act(load_ppo(path))
+
+
+__all__ = ["load_ippo_act", "load_ppo", "make_vec_env", "ppo_act", "train_ippo"]

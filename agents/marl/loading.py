@@ -13,8 +13,8 @@ import numpy as np
 
 from .common import SUFFIX, Act, flat_observations
 from .config import ALGOS
-from .ippo import load_ippo_act
-from .mappo_lag import load_mappo_act
+from .ippo import load_ppo, ppo_act
+from .mappo_lag import mappo_act, read_mappo_checkpoint
 
 
 class MarlAgent:
@@ -52,6 +52,11 @@ def load_marl(path: str, env_id: Optional[str] = None) -> MarlAgent:
     """Load a policy saved by ``safe-mapf train-marl`` (its ``model.json`` must lie beside it).
 
     ``env_id``: raise ``ValueError`` if the policy was trained on another map.
+
+    Nothing the files supply is unpickled: an IPPO file (a stable-baselines3 PPO archive) is read
+    by :func:`~agents.marl.ippo.load_ppo`, a MAPPO-Lagrangian file by
+    :func:`~agents.marl.mappo_lag.read_mappo_checkpoint`. A truncated, corrupt or non-finite file,
+    or a description that does not fit it, raises ``ValueError`` naming the file.
     """
     p = Path(path)
     meta_path = p.with_suffix(".json")
@@ -59,15 +64,28 @@ def load_marl(path: str, env_id: Optional[str] = None) -> MarlAgent:
         raise ValueError(f"no MARL checkpoint at {path}")
     if not meta_path.exists():
         raise ValueError(f"{path}: its description {meta_path.name} is missing (written next to it by train-marl)")
-    meta = json.loads(meta_path.read_text())
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{meta_path} is not a readable description (truncated or corrupt JSON: {exc})") from exc
+    if not isinstance(meta, dict):
+        raise ValueError(f"{meta_path} is not a description of a MARL policy (not a JSON object)")
+    missing = [k for k in ("algo", "env_id", "obs_dim") if k not in meta]
+    if missing:
+        raise ValueError(f"{meta_path} is missing the keys {missing}")
     if env_id is not None and meta.get("env_id") != str(env_id).split(":")[-1]:
         raise ValueError(f"{path} was trained on {meta.get('env_id')!r}, not {env_id!r}")
     if meta.get("algo") == "ippo":
-        act = load_ippo_act(str(p))
+        model = load_ppo(str(p))
+        act, obs_dim = ppo_act(model), int(np.prod(model.observation_space.shape))
     elif meta.get("algo") == "mappo-lag":
-        act = load_mappo_act(str(p))
+        ckpt = read_mappo_checkpoint(str(p))
+        act, obs_dim = mappo_act(ckpt, str(p)), int(ckpt["obs_dim"])
     else:
         raise ValueError(f"{meta_path}: unknown algo {meta.get('algo')!r}")
+    if obs_dim != int(meta["obs_dim"]):
+        raise ValueError(f"{path} takes observations of {obs_dim} values, its description {meta_path.name} "
+                         f"says {meta['obs_dim']}")
     return MarlAgent(act, meta)
 
 

@@ -149,9 +149,12 @@ def train_mappo_lag(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
     opt = torch.optim.Adam(nets.parameters(), lr=cfg.learning_rate)
     lagrange = float(cfg.lagrange_init)
     if run.start_steps:
-        ckpt = torch.load(run.checkpoint, weights_only=True)
-        nets.load_state_dict(ckpt["nets"])
-        opt.load_state_dict(ckpt["optimizer"])
+        ckpt = read_mappo_checkpoint(str(run.checkpoint), resume=True)
+        _load_nets(nets, ckpt, str(run.checkpoint))
+        try:
+            opt.load_state_dict(ckpt["optimizer"])
+        except (ValueError, KeyError, RuntimeError) as exc:
+            raise ValueError(f"{run.checkpoint}: its optimizer state does not fit the networks ({exc})") from exc
         lagrange = float(ckpt["lagrange"])
 
     def act(obs: np.ndarray) -> np.ndarray:
@@ -260,11 +263,46 @@ def _update(nets: MappoNets, opt: torch.optim.Optimizer, obs, crit, act, logp_ol
     return {k: float(np.mean(v)) for k, v in losses.items()}
 
 
-def load_mappo_act(path: str) -> Act:
-    """The deterministic action function (the actor's mean, clipped) of a MAPPO-Lagrangian checkpoint."""
-    ckpt = torch.load(path, weights_only=True)
+def read_mappo_checkpoint(path: str, resume: bool = False) -> Dict[str, Any]:
+    """The content of a MAPPO-Lagrangian checkpoint, checked whole: the file (a torch zip archive)
+    passes its checksums, is read with ``torch.load(weights_only=True)``, holds ``obs_dim``,
+    ``state_dim``, ``net_arch`` and the networks (with ``resume``: the optimizer state and the
+    multiplier too), and every tensor is finite. Anything else raises
+    :class:`~agents.checkpoints.CheckpointError` (a ``ValueError``) naming the file."""
+    from ..checkpoints import CheckpointError, load_tensors, open_zip, read_file_bytes
+
+    name, raw = read_file_bytes(path, suffix="")
+    open_zip(name, raw, what="MAPPO-Lagrangian checkpoint")
+    ckpt = load_tensors(name, raw, "the checkpoint")
+    needed = ["obs_dim", "state_dim", "net_arch", "nets"] + (["optimizer", "lagrange"] if resume else [])
+    if not isinstance(ckpt, dict):
+        raise CheckpointError(f"{name} is not a MAPPO-Lagrangian checkpoint (holds a {type(ckpt).__name__})")
+    missing = [k for k in needed if k not in ckpt]
+    if missing:
+        raise CheckpointError(f"{name} is not a complete MAPPO-Lagrangian checkpoint: missing {missing}")
+    try:
+        dims = [int(ckpt["obs_dim"]), int(ckpt["state_dim"])] + [int(w) for w in ckpt["net_arch"]]
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{name}: obs_dim, state_dim and net_arch must be integers ({exc})") from exc
+    if min(dims) < 1 or not isinstance(ckpt["nets"], dict):
+        raise CheckpointError(f"{name}: sizes {dims} must be >= 1 and 'nets' a state dict")
+    return ckpt
+
+
+def _load_nets(nets: MappoNets, ckpt: Dict[str, Any], name: str) -> None:
+    from ..checkpoints import CheckpointError
+
+    try:
+        nets.load_state_dict(ckpt["nets"])
+    except RuntimeError as exc:
+        raise CheckpointError(f"{name}: its networks do not match obs_dim, state_dim and net_arch ({exc})") from exc
+
+
+def mappo_act(ckpt: Dict[str, Any], name: str) -> Act:
+    """The deterministic action function (the actor's mean, clipped) of a checkpoint's content
+    (:func:`read_mappo_checkpoint`; ``name`` names the file in errors)."""
     nets = MappoNets(int(ckpt["obs_dim"]), int(ckpt["state_dim"]), list(ckpt["net_arch"]))
-    nets.load_state_dict(ckpt["nets"])
+    _load_nets(nets, ckpt, name)
     nets.eval()
 
     def act(obs: np.ndarray) -> np.ndarray:
@@ -274,4 +312,9 @@ def load_mappo_act(path: str) -> Act:
     return act
 
 
-__all__ = ["MappoNets", "load_mappo_act", "train_mappo_lag"]
+def load_mappo_act(path: str) -> Act:
+    """The deterministic action function of the MAPPO-Lagrangian checkpoint at ``path``."""
+    return mappo_act(read_mappo_checkpoint(path), str(path))
+
+
+__all__ = ["MappoNets", "load_mappo_act", "mappo_act", "read_mappo_checkpoint", "train_mappo_lag"]

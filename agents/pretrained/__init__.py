@@ -43,7 +43,10 @@ def load_pretrained(env_id: str, kind: str = "unconstrained", device: str = "cpu
     """Load the shipped ``kind`` checkpoint of ``env_id`` (or the checkpoint at ``path``).
 
     The checkpoint must have been trained on ``env_id`` and fit its observation and action
-    spaces; otherwise :class:`~agents.checkpoints.CheckpointError` names the mismatch.
+    spaces; otherwise :class:`~agents.checkpoints.CheckpointError` names the mismatch. It is read
+    by :meth:`~agents.algorithm.SafeGoalTD3.load`, which unpickles nothing the file supplies and
+    refuses corrupt, truncated, non-finite or unexpected files by name (see
+    :mod:`agents.checkpoints`).
     """
     import gymnasium as gym
 

@@ -14,9 +14,10 @@ import functools
 import inspect
 import math
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from scipy import sparse
@@ -100,6 +101,88 @@ def _check_matrix(m: np.ndarray, name: str, shape: Optional[Tuple[int, int]] = N
         raise ValueError(f"{name} contains negative entries (min {m.min():g})")
     return m
 
+
+# ---------------------------------------------------------------------- graph files
+def read_npz(path: Union[str, Path], what: str) -> Dict[str, np.ndarray]:
+    """Every array of the ``.npz`` file at ``path``, read whole (each member checked against its
+    checksum) without pickle; a missing, truncated or corrupt file raises ``ValueError`` naming
+    ``path`` (``what`` says what the file should be)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: np.asarray(z[k]) for k in z.files}
+    except FileNotFoundError as exc:
+        raise ValueError(f"no {what} at {path}") from exc
+    except (OSError, KeyError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
+        raise ValueError(f"cannot read {path}: it is not a {what} (not an .npz file, or truncated or corrupt: "
+                         f"{type(exc).__name__}: {exc})") from exc
+
+
+def _node_space(space: Any) -> Any:
+    """The space of one node observation in a model's observation space (its ``"observation"``)."""
+    spaces_ = getattr(space, "spaces", None)
+    if isinstance(spaces_, dict) and "observation" in spaces_:
+        return spaces_["observation"]
+    return space
+
+
+def env_record(observations: Optional[np.ndarray], env_id: Optional[str]) -> Dict[str, np.ndarray]:
+    """The arrays a graph file records about where it was made: ``env_id`` and ``observation_shape``."""
+    out: Dict[str, np.ndarray] = {}
+    if env_id:
+        out["env_id"] = np.array(str(env_id).split(":")[-1])
+    if observations is not None:
+        out["observation_shape"] = np.asarray(np.shape(observations)[1:], dtype=np.int64)
+    return out
+
+
+def check_graph_nodes(path: Union[str, Path], arrays: Dict[str, np.ndarray], observations: Optional[np.ndarray],
+                      models: Iterable[Any] = (), env_id: Optional[str] = None,
+                      observation_space: Any = None) -> None:
+    """Check a graph file's node observations against what the file records and the models or
+    environment it is loaded with; ``ValueError`` naming ``path`` and the mismatch.
+
+    - the recorded ``env_id`` (files that record one) must be the id of ``env_id`` and of every
+      model that names its environment (``model.env_id``);
+    - the node observations must have the recorded ``observation_shape`` and the shape of one
+      observation of ``observation_space`` and of every model's space (its ``"observation"``);
+    - they must be finite and inside that space's bounds.
+    """
+    models = [m for m in models if m is not None]
+    recorded = str(arrays["env_id"]) if "env_id" in arrays else None
+    if recorded is not None:
+        wanted = [("the environment", env_id)] + [(type(m).__name__, getattr(m, "env_id", None)) for m in models]
+        for who, eid in wanted:
+            if eid and str(eid).split(":")[-1] != recorded:
+                raise ValueError(f"{path} was made on {recorded!r}; {who} is of {str(eid).split(':')[-1]!r}")
+    if observations is None:
+        return
+    obs = np.asarray(observations)
+    if "observation_shape" in arrays:
+        shape = tuple(int(s) for s in np.asarray(arrays["observation_shape"]).reshape(-1))
+        if obs.shape[1:] != shape:
+            raise ValueError(f"{path}: its node observations have shape {obs.shape[1:]}, the file records {shape}")
+    if obs.dtype.kind not in "biuf":
+        raise ValueError(f"{path}: its node observations are not numbers (dtype {obs.dtype})")
+    if obs.dtype.kind == "f" and not np.isfinite(obs).all():
+        bad = np.flatnonzero(~np.isfinite(obs.reshape(len(obs), -1)).all(axis=1))
+        raise ValueError(f"{path}: {len(bad)} node observations are not finite (NaN or infinity), "
+                         f"first at node {int(bad[0])}")
+    spaces_ = [("the environment", _node_space(observation_space))]
+    spaces_ += [(type(m).__name__, _node_space(getattr(m, "observation_space", None))) for m in models]
+    for who, space in spaces_:
+        space_shape = getattr(space, "shape", None)
+        if space_shape is None:
+            continue
+        if obs.shape[1:] != tuple(space_shape):
+            raise ValueError(f"{path}: its node observations have shape {obs.shape[1:]}, {who} takes "
+                             f"{tuple(space_shape)}")
+        low, high = getattr(space, "low", None), getattr(space, "high", None)
+        if low is not None and high is not None and len(obs):
+            outside = ~((obs >= low) & (obs <= high)).reshape(len(obs), -1).all(axis=1)
+            if outside.any():
+                bad = np.flatnonzero(outside)
+                raise ValueError(f"{path}: {len(bad)} node observations lie outside the bounds of {who}'s "
+                                 f"observation space (first at node {int(bad[0])})")
 
 @dataclass
 class WaypointGraph:
@@ -319,8 +402,10 @@ class WaypointGraph:
         )
 
     # ------------------------------------------------------------------ persistence
-    def save(self, path: Union[str, Path]) -> None:
-        """Save as ``.npz`` (no pickle): both weights, the cut-offs and, if present, observations and positions."""
+    def save(self, path: Union[str, Path], env_id: Optional[str] = None) -> None:
+        """Save as ``.npz`` (no pickle): both weights, the cut-offs and, if present, observations and
+        positions; with them the shape of one observation and ``env_id`` (the environment the nodes
+        come from), which :meth:`load` checks."""
         d = self.distance.tocsr()
         arrays = {
             "format": np.array("waypoint-graph-v1"),
@@ -334,24 +419,43 @@ class WaypointGraph:
             arrays["observations"] = np.asarray(self.observations)
         if self.positions is not None:
             arrays["positions"] = np.asarray(self.positions)
+        arrays.update(env_record(self.observations, env_id))
         np.savez_compressed(path, **arrays)
 
     @classmethod
-    def load(cls, path: Union[str, Path]) -> "WaypointGraph":
-        """Load a graph written by :meth:`save`; raise ``ValueError`` if the file is not one."""
+    def load(cls, path: Union[str, Path], env_id: Optional[str] = None, observation_space: Any = None,
+             models: Sequence[Any] = ()) -> "WaypointGraph":
+        """Load a graph written by :meth:`save`, read whole; raise ``ValueError`` naming ``path`` if
+        the file is not one (missing, truncated, corrupt, inconsistent weights).
+
+        ``env_id``, ``observation_space`` and ``models`` (e.g. the critic that scores new endpoints
+        against the nodes) are checked against the file: the environment it records (files that
+        record one), the shape of its node observations, and that they are finite and inside the
+        space's bounds (see :func:`check_graph_nodes`).
+        """
+        z = read_npz(path, "waypoint graph file")
+        if "format" not in z or str(z["format"]) != "waypoint-graph-v1":
+            raise ValueError(f"{path} is not a waypoint graph file (missing or wrong 'format')")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                if "format" not in z or str(z["format"]) != "waypoint-graph-v1":
-                    raise ValueError(f"{path} is not a waypoint graph file (missing or wrong 'format')")
-                shape = tuple(int(s) for s in z["shape"])
-                d = sparse.csr_matrix((z["distance"], z["indices"], z["indptr"]), shape=shape)
-                coo = d.tocoo()
-                c = sparse.csr_matrix((z["cost"], (coo.row, coo.col)), shape=shape)
-                obs = z["observations"] if "observations" in z else None
-                pos = z["positions"] if "positions" in z else None
-                return cls(d, c, obs, float(z["d_max"]), float(z["c_max"]), pos)
-        except (OSError, KeyError, EOFError, ValueError, zipfile.BadZipFile) as exc:
-            raise ValueError(f"cannot read waypoint graph {path}: {exc}") from exc
+            shape = tuple(int(s) for s in z["shape"])
+            d = sparse.csr_matrix((z["distance"], z["indices"], z["indptr"]), shape=shape)
+            d.check_format(full_check=True)
+            coo = d.tocoo()
+            c = sparse.csr_matrix((z["cost"], (coo.row, coo.col)), shape=shape)
+            d_max, c_max = float(z["d_max"]), float(z["c_max"])
+        except (KeyError, ValueError, TypeError, IndexError) as exc:
+            raise ValueError(f"{path} is not a waypoint graph file: {type(exc).__name__}: {exc}") from exc
+        if len(z["distance"]) and (not np.isfinite(z["distance"]).all() or (z["distance"] < 0).any()):
+            raise ValueError(f"{path}: its edge distances must be finite and >= 0")
+        if len(z["cost"]) and (np.isnan(z["cost"]).any() or (z["cost"] < 0).any()):
+            raise ValueError(f"{path}: its edge costs must be numbers >= 0")
+        obs = z.get("observations")
+        pos = z.get("positions")
+        for name, arr in (("observations", obs), ("positions", pos)):
+            if arr is not None and len(arr) != shape[0]:
+                raise ValueError(f"{path}: it holds {len(arr)} node {name} for a graph of {shape[0]} nodes")
+        check_graph_nodes(path, z, obs, models, env_id, observation_space)
+        return cls(d, c, obs, d_max, c_max, pos)
 
 
 # ---------------------------------------------------------------------- problem graphs
@@ -571,4 +675,5 @@ def build_problem_graph(
 
 
 __all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
-           "check_endpoints", "edge_mask", "passing_edges", "problem_edge_mask"]
+           "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges", "problem_edge_mask",
+           "read_npz"]

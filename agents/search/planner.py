@@ -23,9 +23,9 @@ If the cost-pruned graph leaves some agent without any path, the cut-off is rela
 goal only (doubling until a path exists; ``MultiAgentPlan.c_max`` reports the largest value used), so the rest of
 the graph stays as safe as asked; with ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of
 time, a second call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan. Every
-solver call is budgeted in expansions (``expansion_limit``, ``prioritized_expansions_per_agent``,
-``repair_expansions_per_agent``, ``stepper_expansions_per_agent``), with a wall-clock limit (``time_limit``) only as
-a safety net, so a plan is a function of the problem and the code.
+solver call is budgeted in work (``expansion_limit``, scaled down on dense graphs, ``prioritized_expansions_per_agent``,
+``repair_expansions_per_agent``, ``stepper_expansions_per_agent``) and no wall clock, so a plan is a function of the
+problem and the code, the same on an idle and a loaded machine (``time_limit`` adds a wall-clock limit on request).
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -72,15 +72,32 @@ AUTO_SEARCH_AGENTS = 20
 #: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
 #: buffer graph on an idle machine
 DEFAULT_EXPANSION_LIMIT = 50_000
+#: edge-steps per node (the sum of the problem graph's edge durations over its nodes) up to which one
+#: CBS / ECBS call may make ``expansion_limit`` expansions; on a denser graph, where an expansion scans
+#: more edges, the call may make proportionally fewer (the 2D maps' 1000-node graphs have up to about 300)
+REFERENCE_EDGE_STEPS = 300
 #: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
 #: 64,000 to 426,000 safe-interval expansions (hard problems; 222 agents, the most the
-#: environment holds, are not solved)
+#: 1000-node graph places, are not solved)
 DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_500
 #: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
 DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 #: default ``stepper_expansions_per_agent``: the priority inheritance stepper's budget per agent
 #: (222 agents on the 1000-node buffer graph take 2,300 to 2,600 per agent)
 DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
+
+
+def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
+    """The first two indices whose rows of ``x`` are equal, or ``None``."""
+    rows = np.asarray(x)
+    if rows.ndim == 0 or len(rows) < 2:
+        return None
+    _, first, inverse = np.unique(rows.reshape(len(rows), -1), axis=0, return_index=True, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    for i, k in enumerate(inverse):
+        if first[k] != i:
+            return int(first[k]), i
+    return None
 
 
 def _times(per_agent: Optional[int], k: int) -> Optional[int]:
@@ -201,15 +218,17 @@ class BufferPlanner:
             conflict-free path takes the least conflicting one, then small groups of agents re-planned until no
             conflict is left; solves crowds where prioritised planning gives up), ``"pibt"`` (the priority
             inheritance stepper, :func:`~agents.search.mapf.pibt.solve_pibt`: all agents step together, an agent in
-            the way of a more urgent one is pushed off its node; solves the crowds of the most agents the
-            environment holds, with long makespans) or ``"auto"`` (default): ``"cbs"`` for up to
+            the way of a more urgent one is pushed off its node; solves the crowds of the most agents a
+            problem on the graph places, with long makespans) or ``"auto"`` (default): ``"cbs"`` for up to
             ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its budget (status
             ``"timeout"``), else ``"prioritized"``, then ``"pibt"`` if prioritised planning gives up (status
             ``"timeout"``; not the repair: where prioritised planning gives up on the 1000-node buffer graph, the
             repair spent its whole budget, about a minute, and solved none).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions (space-time states;
-            ``None``: none). Counted in work, not seconds, so the same problem gives the same plan (or the same
-            timeout) on an idle and a loaded machine.
+            ``None``: none), on graphs of up to ``REFERENCE_EDGE_STEPS`` edge-steps per node; on denser graphs the
+            call makes proportionally fewer, so that the edges it scans stay within the same budget. Counted in
+            work, not seconds, so the same problem gives the same plan (or the same timeout) on an idle and a
+            loaded machine.
         prioritized_expansions_per_agent: the work budget of prioritised planning, in safe-interval expansions over
             all agents and restarts, per agent (``None``: none).
         repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in search expansions over
@@ -218,8 +237,9 @@ class BufferPlanner:
             same plan).
         stepper_expansions_per_agent: the work budget of the priority inheritance stepper, in candidate moves
             examined, per agent (``None``: none).
-        time_limit: seconds for one solver call, a safety net behind ``expansion_limit``. Either ends the call with
-            status ``"timeout"`` (the message says which).
+        time_limit: wall-clock seconds for one solver call (``None``, the default: no wall-clock limit, the budgets
+            in work alone end a call). A limit in seconds makes plans depend on the machine's load; either ends
+            the call with status ``"timeout"`` (the message says which).
         relax_cost: relax ``c_max`` locally until every agent has a path (otherwise report infeasible); see
             :func:`~agents.search.pruning.relax_cost_locally`.
         fallback_suboptimality: if CBS runs out of time, one more try with this (larger) suboptimality bound and the
@@ -269,7 +289,7 @@ class BufferPlanner:
         repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
         repair_seed: int = 0,
         stepper_expansions_per_agent: Optional[int] = DEFAULT_STEPPER_EXPANSIONS_PER_AGENT,
-        time_limit: float = 30.0,
+        time_limit: Optional[float] = None,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
         budget_labels: int = 2_000,
@@ -313,8 +333,8 @@ class BufferPlanner:
                 raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
         if isinstance(repair_seed, bool) or not isinstance(repair_seed, (int, np.integer)):
             raise ValueError(f"repair_seed must be an integer, got {repair_seed!r}")
-        if not time_limit > 0:
-            raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+        if time_limit is not None and not time_limit > 0:
+            raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
         for name, factor in (("fallback_suboptimality", fallback_suboptimality), ("cost_guard", cost_guard),
                              ("detour", detour)):
             if factor is not None and not factor >= 1.0:
@@ -329,7 +349,7 @@ class BufferPlanner:
         (self.expansion_limit, self.prioritized_expansions_per_agent, self.repair_expansions_per_agent,
          self.stepper_expansions_per_agent) = (None if v is None else int(v) for v in limits)
         self.repair_seed = int(repair_seed)
-        self.time_limit = float(time_limit)
+        self.time_limit = None if time_limit is None else float(time_limit)
         self.relax_cost = bool(relax_cost)
         self.fallback_suboptimality = fallback_suboptimality
         self.budget_labels = int(budget_labels)
@@ -469,6 +489,11 @@ class BufferPlanner:
         reach its goal from.
         """
         t0 = time.perf_counter()
+        for name, ends in (("start", starts), ("goal", goals)):
+            same = _same_rows(ends)
+            if same is not None:
+                raise ValueError(f"agents {same[0]} and {same[1]} have the same {name}: no plan brings both there "
+                                 "(every agent needs a place of its own)")
         problem = self.problem_graph(starts, goals, exclude, exclude_edges, avoid, detached, goal_detached)
         k = problem.n_agents
         s_ids, g_ids = problem.start_ids, problem.goal_ids
@@ -520,8 +545,9 @@ class BufferPlanner:
                 return stepped, "pibt"
         else:
             fb = self.fallback_suboptimality
+            limit = self.cbs_expansion_limit(durations)
             for w in (self.suboptimality,) if fb is None or fb <= self.suboptimality else (self.suboptimality, fb):
-                res = CBSSolver(inst, suboptimality=w, time_limit=self.time_limit, expansion_limit=self.expansion_limit,
+                res = CBSSolver(inst, suboptimality=w, time_limit=self.time_limit, expansion_limit=limit,
                                 spread=self.spread_routes).solve()
                 if res.status != "timeout":
                     break
@@ -530,6 +556,17 @@ class BufferPlanner:
             repaired.message = f"{repaired.message} (after {solver}: {res.message})"
             return repaired, "lns"
         return res, solver
+
+    def cbs_expansion_limit(self, durations: sparse.csr_matrix) -> Optional[int]:
+        """The expansion budget of one CBS / ECBS call on a problem graph with these edge durations:
+        ``expansion_limit``, scaled down where the graph has more than ``REFERENCE_EDGE_STEPS``
+        edge-steps per node."""
+        if self.expansion_limit is None:
+            return None
+        density = float(durations.data.sum()) / max(1, durations.shape[0])
+        if density <= REFERENCE_EDGE_STEPS:
+            return self.expansion_limit
+        return max(1, int(self.expansion_limit * REFERENCE_EDGE_STEPS / density))
 
     def _repair(self, inst: MapfInstance) -> CBSResult:
         """The large-neighbourhood repair with this planner's budget and seed."""

@@ -37,7 +37,7 @@ import numpy as np
 
 from .controller import AgentPlan, WaypointController
 from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
-from .graph import NodePairwise, ProblemGraph
+from .graph import NodePairwise, ProblemGraph, check_graph_nodes, env_record, read_npz
 from .models import (
     buffer_observations,
     check_models,
@@ -57,15 +57,26 @@ from .stats import ControllerStats
 from .waypoints import direct_plans
 
 
+class UnknownOptionError(ValueError, TypeError):
+    """Options that neither :class:`BufferPlanner` nor the policy takes (a ``ValueError``, and a
+    ``TypeError`` as for an unknown keyword argument)."""
+
+
+def planner_option_names() -> List[str]:
+    """The options of :class:`BufferPlanner` (its keyword arguments besides nodes, matrices and critic)."""
+    return sorted(set(inspect.signature(BufferPlanner.__init__).parameters)
+                  - {"self", "observations", "D", "C", "pairwise"})
+
+
 def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
-    """``options`` split into those of :class:`BufferPlanner` and those of the policy class ``cls``."""
-    planner = set(inspect.signature(BufferPlanner.__init__).parameters) - {"self", "observations", "D", "C",
-                                                                          "pairwise"}
+    """``options`` split into those of :class:`BufferPlanner` and those of the policy class ``cls``;
+    :class:`UnknownOptionError` names the unknown ones and lists the valid ones."""
+    planner = set(planner_option_names())
     policy = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}  # type: ignore
     unknown = set(options) - planner - policy
     if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner)}; "
-                        f"policy options: {sorted(policy)}")
+        raise UnknownOptionError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner)}; "
+                                 f"policy options: {sorted(policy)}")
     return {k: v for k, v in options.items() if k in planner}, {k: v for k, v in options.items() if k in policy}
 
 
@@ -291,13 +302,19 @@ class SearchPolicy(StuckReplanning):
     # ------------------------------------------------------------------ persistence
     def save(self, path: Union[str, Path]) -> Path:
         """Write the graph (node observations, ``D``, ``C``, the planner's options) and what it learned
-        (:attr:`memory`) to ``path`` (``.npz``); :meth:`load` reads it back with the models."""
+        (:attr:`memory`) to ``path`` (``.npz``), with the environment of the critic that made ``D``
+        and ``C`` and the shape of one observation; :meth:`load` reads it back with the models and
+        checks them against this record."""
         if self.planner is None:
             raise ValueError("this SearchPolicy has no planner, hence no graph to save")
         p = self.planner
         path = Path(path)
+        critic = getattr(p.pairwise, "model", None)
+        env_id = next((getattr(m, "env_id", None) for m in (critic, self.distance_model, self.policy_model)
+                       if getattr(m, "env_id", None)), None)
         arrays: Dict[str, Any] = dict(observations=p.observations, D=p.D, C=p.C,
                                       planner_options=np.array(json.dumps(p.options())), **self.memory.arrays())
+        arrays.update(env_record(p.observations, env_id))
         np.savez_compressed(path, **arrays)
         return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
@@ -309,17 +326,42 @@ class SearchPolicy(StuckReplanning):
         ``critic`` attaches start and goal observations to the graph (the model whose critics made
         ``D`` and ``C``), ``driver`` drives (default: the critic); ``options`` override saved planner
         options (``c_max``, ...) and set :class:`SearchPolicy` options, as in :meth:`from_models`.
+
+        The file is read whole and checked: a missing, truncated or corrupt file, matrices that do
+        not fit the nodes, saved planner options the planner does not take, node observations that
+        are not finite or lie outside the critic's observation space, and a file made on another
+        environment than the models' (files that record one) raise ``ValueError`` naming ``path``.
         """
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                obs, D, C = np.asarray(f["observations"]), np.asarray(f["D"]), np.asarray(f["C"])
-                saved = json.loads(str(f["planner_options"]))
-                memory = EdgeMemory.from_arrays(f)
-        except (OSError, KeyError, ValueError, EOFError) as e:
-            raise ValueError(f"{path} is not a saved SearchPolicy graph: {e}") from None
         planner_options, kwargs = _split_options(cls, options)
+        f = read_npz(path, "saved SearchPolicy graph")
+        missing = [k for k in ("observations", "D", "C", "planner_options") if k not in f]
+        if missing:
+            raise ValueError(f"{path} is not a saved SearchPolicy graph: it lacks {missing}")
+        obs, D, C = f["observations"], f["D"], f["C"]
+        n = len(obs) if obs.ndim else -1
+        for name, m in (("D", D), ("C", C)):
+            if m.shape != (n, n) or m.dtype.kind not in "biuf":
+                raise ValueError(f"{path}: {name} must be a ({n}, {n}) matrix of numbers for its {n} nodes, "
+                                 f"got {m.shape} {m.dtype}")
+            if not np.isfinite(m).all() or (m < 0).any():
+                raise ValueError(f"{path}: {name} must be finite and non-negative")
+        try:
+            saved = json.loads(str(f["planner_options"]))
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: its planner options are not JSON ({e})") from None
+        if not isinstance(saved, dict):
+            raise ValueError(f"{path}: its planner options are not a JSON object")
+        unknown = sorted(set(saved) - set(planner_option_names()))
+        if unknown:
+            raise ValueError(f"{path}: its planner options {unknown} are not options of the planner; "
+                             f"valid: {planner_option_names()}")
+        try:
+            memory = EdgeMemory.from_arrays(f)
+        except ValueError as e:
+            raise ValueError(f"{path} is not a saved SearchPolicy graph: {e}") from None
         if memory.n_nodes != len(obs):
             raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
+        check_graph_nodes(path, f, obs, models=(critic, driver))
         planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
         if planner_options["second_opinion"] is None:
             saved.pop("max_leg", None)  # nothing to read legs with
@@ -592,4 +634,4 @@ class SearchPolicy(StuckReplanning):
         return out
 
 
-__all__ = ["Leg", "SearchPolicy"]
+__all__ = ["Leg", "SearchPolicy", "UnknownOptionError", "planner_option_names"]

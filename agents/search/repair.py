@@ -133,9 +133,15 @@ class EdgeMemory:
 
     @classmethod
     def load(cls, path: Union[str, Path]) -> "EdgeMemory":
-        """Read a memory written by :meth:`save`."""
-        with np.load(path) as f:
-            return cls.from_arrays(f)
+        """Read a memory written by :meth:`save`, whole and without pickle; a missing, truncated,
+        corrupt or malformed file raises ``ValueError`` naming ``path``."""
+        from .graph import read_npz
+
+        arrays = read_npz(path, "saved edge memory")
+        try:
+            return cls.from_arrays(arrays)
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
 
 
 def past_failed_waypoints(route: Sequence[int], goal: int, D: np.ndarray, failed: Sequence[int],

@@ -90,8 +90,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the safety layer between the controller and the env, which keeps agents from touching "
                         "each other with the team's shared positions (agents.search.safety; default on; 'off' "
                         "shows what the agents do without it)")
-    p.add_argument("--max-cycles", type=int, default=300, help="step limit of a run (default 300)")
+    p.add_argument("--max-cycles", type=_positive, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the evaluation in --out: the runs already in its runs.csv are kept and not run "
+                        "again (the settings that decide the rows must be those of the evaluation there)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="start anew in an --out that holds an earlier evaluation: the files it wrote are removed "
+                        "first (without --resume or --overwrite, an --out that holds files is refused)")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
                    help="also draw the trajectory figure (default on)")
     p.add_argument("--video", action="store_true",
@@ -131,23 +137,102 @@ FULL_RUN_NOTE = ("the full Table I (--agents 1 5 10 20 --problems 50, the four m
                  "1126 s serially, 580 s with --ray")
 
 
+#: what an evaluation writes into --out (--overwrite removes these, and only these)
+EVALUATE_OUTPUTS = ("run.json", "runs.csv", "table.csv", "table.json", "table.md", "figure.png", "run.gif",
+                    "failures.csv", "anatomy.csv", "anatomy.md", "anatomy.png", "c_max.json", "validation_runs.csv",
+                    "edge_memory_*.npz")
+#: options that do not change the rows: a resumed evaluation may give others
+NOT_ROW_SETTINGS = ("out", "resume", "overwrite", "no_progress", "json", "figure", "video", "ray", "command", "func",
+                    "argv", "interrupt_note")
+
+
+def _folder(args: argparse.Namespace):
+    from agents.run_folder import RunFolder
+
+    return RunFolder(args.out, "safe-mapf evaluate", EVALUATE_OUTPUTS, "run.json")
+
+
+def _settings(args: argparse.Namespace) -> dict:
+    """The options that decide the rows (recorded in run.json, compared by --resume)."""
+    return {k: v for k, v in sorted(vars(args).items()) if k not in NOT_ROW_SETTINGS and not callable(v)}
+
+
+def _flag(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
 def _check_before_work(args: argparse.Namespace):
-    """Agent counts that fit the map and the graph, and a writable ``--out``; returns the output folder."""
+    """Agent counts that fit the map and the graph, what ``--out`` allows (``--resume``,
+    ``--overwrite``) and that it is writable; returns the output folder. Writes nothing."""
     import safe_mapf_envs
+    from baselines.evaluation import placeable_agents
     from baselines.output import check_output_dir
 
     too_many = [n for n in args.agents if n > args.nodes]
     if too_many:
         raise ValueError(f"--agents {max(too_many)}: more agents than graph nodes (--nodes {args.nodes}); every "
                          "agent needs a start and a goal node of its own")
+    _folder(args).check(_settings(args), resume=args.resume, overwrite=args.overwrite, may_differ=NOT_ROW_SETTINGS,
+                        describe=_flag)
     if args.protocol == "strict":  # agents collide: they must fit on the map side by side, apart
-        try:
-            env = safe_mapf_envs.parallel_env(args.env, n_agents=max(args.agents))
-            env.reset(seed=args.seed)  # places the starts and goals at the separation problems keep
-            env.close()
+        try:  # the env's constructor decides whether every reset can place them
+            safe_mapf_envs.parallel_env(args.env, n_agents=max(args.agents)).close()
         except ValueError as exc:
             raise ValueError(f"--agents {max(args.agents)}: {exc}") from None
+        placed, separation = placeable_agents(args.env, max(args.agents), n_nodes=args.nodes, seed=args.seed)
+        if placed < max(args.agents):
+            raise ValueError(f"--agents {max(args.agents)}: the {args.nodes} graph nodes of --seed {args.seed} hold "
+                             f"about {placed} agents {separation:g} units apart, as a problem's starts must stand "
+                             "(the most of 200 placements); use fewer agents or more --nodes")
     return check_output_dir(args.out)
+
+
+def _open_rows(args: argparse.Namespace, out, failure_file: bool = True):
+    """Make ``--out`` ready (see :class:`agents.run_folder.RunFolder`) and open its row files.
+
+    Returns ``(kept, writer, failures, failure_writer)``: the rows of the runs an interrupted
+    evaluation there already ran (``--resume``; parsed) and a writer that appends to
+    ``runs.csv``; the failure records of the kept runs and a writer that appends to
+    ``failures.csv`` (``None``, ``[]`` and ``None`` without ``failure_file``). Without ``--resume``
+    both start empty."""
+    import shlex
+
+    from baselines.anatomy import AgentFailure
+    from baselines.cli import resume_command
+    from baselines.output import RowWriter, parse_row, read_kept_rows, write_rows_atomic
+
+    _folder(args).prepare(_settings(args), resume=args.resume, overwrite=args.overwrite,
+                          may_differ=NOT_ROW_SETTINGS, describe=_flag,
+                          extra={"command": shlex.join(["safe-mapf", *getattr(args, "argv", [])])})
+    kept = read_kept_rows(out / "runs.csv") if args.resume else []
+    fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
+    keys = {(r["method"], r["agents"], r["difficulty"], r["problem"]) for r in kept}
+    failures = [r for r in (read_kept_rows(out / "failures.csv") if args.resume else [])
+                if (r.get("method"), r.get("agents"), r.get("difficulty"), r.get("problem")) in keys]
+    if args.resume:  # without a line an interruption cut off
+        write_rows_atomic(kept, out / "runs.csv", fields=list(kept[0]) if kept else None)
+    if failure_file:
+        write_rows_atomic(failures, out / "failures.csv", fields=fields)
+    writer = RowWriter(out / "runs.csv", append=True)
+    args.interrupt_note = lambda: (
+        f"kept {len(kept) + writer.count} runs in {out / 'runs.csv'}; continue with: "
+        + resume_command(getattr(args, "argv", [])))
+    failure_writer = RowWriter(out / "failures.csv", fields, append=True) if failure_file else None
+    return [parse_row(r) for r in kept], writer, failures, failure_writer
+
+
+
+def _read_c_max_file(path, flag: str) -> dict:
+    """The content of a ``c_max.json`` (``flag`` names where it came from in errors)."""
+    from agents.run_folder import read_json
+
+    try:
+        meta = read_json(path, what=f"{flag} file")
+    except FileNotFoundError:
+        raise ValueError(f"{flag} {str(path)!r}: no such file") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("chosen"), dict):
+        raise ValueError(f"{flag} {str(path)!r} is not the c_max.json of an evaluation (no 'chosen' entry)")
+    return meta
 
 
 def _small_run_note(args: argparse.Namespace) -> str:
@@ -203,10 +288,10 @@ def run(args: argparse.Namespace) -> int:
     largest finite shortest-path distance on the buffer graph divided by 8 / 4 / 2), then write
     per-run rows (runs.csv), the aggregate (table.csv, table.json), a Markdown table laid out like the
     paper's Table I (table.md, printed) and the trajectory figure (figure.png)."""
-    from pathlib import Path
 
     import torch
 
+    from agents.run_folder import atomic_output, write_atomic
     from baselines.anatomy import failure_records
     from baselines.cli import show_progress
     from baselines.evaluation import (
@@ -221,7 +306,6 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
     )
     from baselines.methods import DEFAULT_METHODS, get_methods
-    from baselines.output import RowWriter
 
     repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
     if args.repair_problems and repair_seed == args.seed:
@@ -253,7 +337,7 @@ def run(args: argparse.Namespace) -> int:
     if args.c_max_from is not None:
         if args.c_max is not None:
             raise ValueError("give --c-max or --c-max-from, not both")
-        meta = json.loads(Path(args.c_max_from).read_text())
+        meta = _read_c_max_file(args.c_max_from, "--c-max-from")
         if meta.get("test_seed") is not None and meta.get("validation_seed") == args.seed:
             raise ValueError(f"{args.c_max_from} chose c_max on seed {args.seed}, the test seed of this run")
         chosen = {int(k): float(v) for k, v in meta["chosen"].items()}
@@ -295,9 +379,15 @@ def run(args: argparse.Namespace) -> int:
     if args.max_leg is not None and math.isfinite(args.max_leg) and default_second_opinion(
             models["unconstrained"], models["constrained"]) is None:
         raise ValueError("--max-leg needs a constrained agent with a distance critic of its own to read the legs with")
+    kept, writer, failures, failure_writer = _open_rows(args, out)  # every check passed: the folder is ours
+    assert failure_writer is not None
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
                                   sparsify=args.sparsify, max_edges=args.max_edges)
     progress = show_progress(args.no_progress or args.json)
+    if chosen is None and args.c_max == "auto" and args.resume and (out / "c_max.json").exists():
+        meta = _read_c_max_file(out / "c_max.json", "--resume: the folder's")  # chosen before the interruption
+        chosen = {k: float(meta["chosen"][str(k)]) for k in args.agents}
+        validation_seed = meta.get("validation_seed")
     if chosen is None and args.c_max == "auto":
         constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]  # not empty: checked above
         vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
@@ -306,38 +396,48 @@ def run(args: argparse.Namespace) -> int:
                            max_cycles=args.max_cycles, progress=progress, ray=args.ray)
         chosen, validation_seed = sel.chosen, sel.seed
         write_csv(sel.rows, out / "validation_runs.csv")
-        (out / "c_max.json").write_text(json.dumps(
+        write_atomic(out / "c_max.json", json.dumps(
             {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
              "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
              "table": sel.table}, indent=1))
     memories = None
     if args.repair_problems:
-        memories = learn_edge_memory(setup, methods, args.agents, args.difficulty, args.repair_problems,
-                                     seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
-                                     progress=progress, policy_agents=args.policies_at, c_max_by_agents=chosen,
-                                     ray=args.ray)
-        for name, memory in memories.items():
-            memory.save(out / f"edge_memory_{name}.npz")
-    failures: list = []
+        from agents.search.repair import EdgeMemory
+
+        names = [m.name for m in methods if m.search]
+        paths = {name: out / f"edge_memory_{name}.npz" for name in names}
+        if args.resume and all(p.exists() for p in paths.values()):  # learned before the interruption
+            memories = {name: EdgeMemory.load(p) for name, p in paths.items()}
+        else:
+            memories = learn_edge_memory(setup, methods, args.agents, args.difficulty, args.repair_problems,
+                                         seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
+                                         progress=progress, policy_agents=args.policies_at,
+                                         c_max_by_agents=chosen, ray=args.ray)
+            for name, memory in memories.items():
+                with atomic_output(out / f"edge_memory_{name}.npz") as tmp:
+                    memory.save(tmp)
 
     def keep(row, _problem, ex) -> None:
+        records = failure_records(row, ex.failures)
+        for record in records:  # before the row: a row in runs.csv always has its failures beside it
+            failure_writer.write(record)
         writer.write(row)
-        failures.extend(failure_records(row, ex.failures))
+        failures.extend(records)
 
-    with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
+    with writer, failure_writer:  # rows reach the files as they come
         rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                         max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                        c_max_by_agents=chosen, ray=args.ray, memories=memories, on_run=keep)
+                        c_max_by_agents=chosen, ray=args.ray, memories=memories, on_run=keep, kept=kept)
     agg = aggregate(rows)
     write_csv(agg, out / "table.csv")
-    (out / "table.json").write_text(json.dumps(agg, indent=1))
+    write_atomic(out / "table.json", json.dumps(agg, indent=1))
     anatomy = write_anatomy(rows, failures, out, title=args.env)
     names = [m.name for m in methods]
     table = markdown_table(agg, names)
     wall = time.perf_counter() - t0
     header = (f"{args.env}: largest cumulative cost over agents, mean ± std over successful runs "
               f"(success rate; safety rate: the share of agents that never touched another); {args.problems} "
-              f"problems per cell, seed {args.seed}, {wall:.0f} s\n\n")
+              f"problem{'s' if args.problems != 1 else ''} per cell, seed {args.seed}, {wall:.0f} s\n\n")
     if chosen is not None:
         header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
@@ -357,7 +457,7 @@ def run(args: argparse.Namespace) -> int:
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
-    (out / "table.md").write_text(header + table + "\n\nMean cumulative cost over agents:\n\n"
+    write_atomic(out / "table.md", header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
     # the figure's rows: the smallest evaluated agent count and the largest one up to 10
     counts = sorted(set(args.agents))
@@ -370,13 +470,14 @@ def run(args: argparse.Namespace) -> int:
     if args.figure:
         from baselines.figures import trajectory_figure
 
-        trajectory_figure(setup, fig_methods, out / "figure.png", agent_counts=fig_counts, seed=args.seed)
+        with atomic_output(out / "figure.png") as tmp:
+            trajectory_figure(setup, fig_methods, tmp, agent_counts=fig_counts, seed=args.seed)
     if args.video:
         from baselines.figures import run_animation
 
         search = [m for m in fig_methods if m.search] or list(fig_methods)
-        run_animation(setup, search[-1], out / "run.gif", n_agents=multi, seed=args.seed,
-                      max_cycles=args.max_cycles)
+        with atomic_output(out / "run.gif") as tmp:
+            run_animation(setup, search[-1], tmp, n_agents=multi, seed=args.seed, max_cycles=args.max_cycles)
     if args.json:
         print(json.dumps(agg))
     else:
@@ -399,20 +500,20 @@ def write_anatomy(rows, failures, out, title: str = "") -> str:
     """Write the failure anatomy of an evaluation into ``out``: ``failures.csv`` (one row per agent
     that did not arrive), ``anatomy.csv`` / ``anatomy.md`` (reasons per cell) and ``anatomy.png``
     (stacked bars); returns the Markdown table."""
+    from agents.run_folder import atomic_output, write_atomic
     from baselines.anatomy import AgentFailure, anatomy_figure, anatomy_table, failure_summary
     from baselines.evaluation import write_csv
+    from baselines.output import write_rows_atomic
 
-    if failures:
-        write_csv(failures, out / "failures.csv")
-    else:  # a header alone says that every agent arrived
-        fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
-        (out / "failures.csv").write_text(",".join(fields) + "\n")
+    fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
+    write_rows_atomic(failures, out / "failures.csv", fields=fields)  # a header alone: every agent arrived
     summary = failure_summary(rows)
     write_csv(summary, out / "anatomy.csv")
     table = anatomy_table(summary)
-    (out / "anatomy.md").write_text(f"{title}: why agents did not arrive (failed agents per reason, share of the "
-                                    "cell's failed agents)\n\n" + table + "\n")
-    anatomy_figure(summary, out / "anatomy.png", title=title)
+    write_atomic(out / "anatomy.md", f"{title}: why agents did not arrive (failed agents per reason, share of the "
+                                     "cell's failed agents)\n\n" + table + "\n")
+    with atomic_output(out / "anatomy.png") as tmp:
+        anatomy_figure(summary, tmp, title=title)
     return table
 
 
@@ -422,7 +523,6 @@ def _run_paper(args: argparse.Namespace) -> int:
     from agents import load_pretrained
     from baselines.cli import show_progress
     from baselines.methods import MARL_METHODS, get_methods
-    from baselines.output import RowWriter
     from baselines.paper_protocol import PAPER_PROTOCOL_METHODS, PaperSetup, evaluate_paper, write_paper_outputs
 
     names = list(dict.fromkeys(args.methods or PAPER_PROTOCOL_METHODS))
@@ -450,12 +550,13 @@ def _run_paper(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
     models.update(marl)
+    kept, writer, _, _ = _open_rows(args, out, failure_file=False)  # every check passed: the folder is ours
     setup = PaperSetup.build(args.env, models, n_nodes=args.nodes, seed=args.seed)
     progress = show_progress(args.no_progress or args.json)
-    with RowWriter(out / "runs.csv") as writer:  # rows reach the file as they come
+    with writer:  # rows reach the file as they come
         rows = evaluate_paper(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                               max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
-                              candidates=args.paper_candidates, on_row=writer.write, ray=args.ray)
+                              candidates=args.paper_candidates, on_row=writer.write, ray=args.ray, kept=kept)
     agg, text = write_paper_outputs(rows, out, names, env_id=args.env, n_problems=args.problems, seed=args.seed,
                                     wall=time.perf_counter() - t0, cost_limit=setup.cost_limit,
                                     grid=setup.c_max_grid(), targets=setup.targets)

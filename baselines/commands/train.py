@@ -99,7 +99,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--eval-seed", type=int, default=d.eval_seed)
     g.add_argument("--threads", type=int, default=d.threads, help="torch threads")
     g.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its last resume point, up to --timesteps steps in all")
+                   help="continue the run in --out from its last resume point, up to --timesteps steps in all "
+                        "(with the run's own settings; --timesteps, --threads and the output options may change)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="start anew in an --out that holds an earlier run: the files that run wrote are removed "
+                        "first (without --resume or --overwrite, an --out that holds files is refused)")
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
     g.add_argument("--no-progress", dest="progress_bar", action="store_false",
@@ -146,18 +150,35 @@ def run(args: argparse.Namespace) -> int:
     --eval-max-distance, mean episode cost, Spearman correlation of predicted distances).
     With --seeds, one such run per seed (in parallel on Ray with --ray) and a combined summary.
     """
-    from agents.training import train_stage
+    from agents.training import check_run, train_stage
 
     cfg = config_from_args(args)
-    command = ["safe-mapf", *sys.argv[1:]] if sys.argv else None
+    command = ["safe-mapf", *getattr(args, "argv", sys.argv[1:])]
+    args.interrupt_note = lambda: _interrupt_note(args, cfg)
     if args.seeds is not None or args.ray is not None:
         return _run_seeds(args, cfg, command)
+    check_run(cfg)
     summary = train_stage(cfg, command=command)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
         print(_line(summary))
     return 0
+
+
+def _interrupt_note(args: argparse.Namespace, cfg: Any) -> str:
+    """What an interrupted ``train`` kept, and the command that continues it."""
+    import os
+
+    from baselines.cli import resume_command
+
+    folders = ([os.path.join(args.out_dir or "", f"s{s}") for s in args.seeds] if args.seeds
+               else [cfg.resolved_out_dir()])
+    points = [f for f in folders if os.path.exists(os.path.join(f, "resume", "state.json"))]
+    if not points:
+        return "no resume point was written yet (one comes every --replay-save-freq steps)"
+    return (f"the last resume point is kept in {', '.join(os.path.join(f, 'resume') for f in points)}; continue with: "
+            + resume_command(getattr(args, "argv", [])))
 
 
 def _line(summary: Dict[str, Any], seed: bool = False) -> str:
@@ -183,11 +204,20 @@ def _run_seeds(args: argparse.Namespace, cfg: Any, command: Optional[List[str]])
 
     import numpy as np
 
+    from agents.run_folder import write_json_atomic
+    from agents.training import check_run
+
     if args.seeds is None:
         raise ValueError("--ray trains several seeds at once: give them with --seeds S [S ...]")
     seeds = list(dict.fromkeys(args.seeds))
     base = args.out_dir or os.path.join("runs", f"{cfg.env_id.split(':')[-1]}-{cfg.stage}")
     cfgs = [dataclasses.replace(cfg, seed=s, out_dir=os.path.join(base, f"s{s}")) for s in seeds]
+    for c in cfgs:  # every seed's folder, before the first run starts
+        check_run(c)
+    if args.ray is not None:
+        from baselines.distributed import require_ray
+
+        require_ray()
     t0 = time.perf_counter()
     if args.ray is not None:
         from baselines.distributed import init_ray
@@ -222,8 +252,7 @@ def _run_seeds(args: argparse.Namespace, cfg: Any, command: Optional[List[str]])
         x = np.array([r[v] for r in combined["runs"]], dtype=np.float64)
         combined[v] = {"mean": float(x.mean()), "std": float(x.std()), "min": float(x.min()), "max": float(x.max())}
     os.makedirs(base, exist_ok=True)
-    with open(os.path.join(base, "summary.json"), "w") as f:
-        json.dump(combined, f, indent=2)
+    write_json_atomic(os.path.join(base, "summary.json"), combined)
     if args.json:
         print(json.dumps(combined, indent=2))
     else:

@@ -31,7 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder (default runs/<env>-<algo>-s<seed>): model.zip or model.pt with model.json, "
                         "checkpoint files, config.json, evaluations.jsonl, summary.json")
     p.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its last resume point, up to --timesteps agent steps in all")
+                   help="continue the run in --out from its last resume point, up to --timesteps agent steps in all "
+                        "(with the run's own settings; --timesteps, --threads and the output options may change)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="start anew in an --out that holds an earlier run: the files that run wrote are removed "
+                        "first (without --resume or --overwrite, an --out that holds files is refused)")
     g = p.add_argument_group("learning")
     g.add_argument("--max-cycles", type=_int, default=d.max_cycles, help="steps per training episode")
     g.add_argument("--goal-distance", type=float, nargs=2, metavar=("LO", "HI"), default=None,
@@ -69,6 +73,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _interrupt_note(args: argparse.Namespace, cfgs) -> str:
+    """What an interrupted ``train-marl`` kept, and the command that continues it."""
+
+    from agents.marl.common import RunFolder
+    from baselines.cli import resume_command
+
+    points = [RunFolder.folder(c) for c in cfgs if (RunFolder.folder(c) / "checkpoint.json").exists()]
+    if not points:
+        return "no resume point was written yet (one comes every --eval-freq agent steps)"
+    return (f"the last resume point is kept in {', '.join(map(str, points))}; continue with: "
+            + resume_command(getattr(args, "argv", [])))
+
+
 def _int(text: str) -> int:
     try:
         return int(text)
@@ -84,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
     --methods ippo mappo_lag --ippo PATH --mappo-lag PATH` puts the policies in the tables."""
     import dataclasses
 
-    from agents.marl import MarlConfig, train_marl
     from agents.marl.common import RunFolder, print_line
+    from agents.marl.config import MarlConfig
+    from agents.marl.training import train_marl
     from baselines.cli import MissingExtraError, show_progress
 
     names = {f.name for f in dataclasses.fields(MarlConfig)}
@@ -102,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
             raise MissingExtraError("--algo ippo needs SuperSuit: pip install \"safe-mapf[marl]\"") from None
     for cfg in cfgs:  # every run's folder, before the first run starts
         RunFolder.check(cfg)
-    command = ["safe-mapf", *sys.argv[1:]] if sys.argv else None
+    command = ["safe-mapf", *getattr(args, "argv", sys.argv[1:])]
+    args.interrupt_note = lambda: _interrupt_note(args, cfgs)
     for cfg in cfgs:
         summary = train_marl(cfg, command=command)
         print(json.dumps(summary, indent=1) if args.json else print_line(summary), flush=True)

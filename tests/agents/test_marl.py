@@ -49,7 +49,7 @@ def test_resume_continues_from_the_last_resume_point(algo, tmp_path):
     out = str(tmp_path / "run")
     cfg = dict(TINY, algo=algo, out_dir=out, timesteps=200)
     first = train_marl(MarlConfig(**cfg))
-    with pytest.raises(ValueError, match="already holds a run"):
+    with pytest.raises(ValueError, match="is not empty"):
         train_marl(MarlConfig(**cfg))
     second = train_marl(MarlConfig(**dict(cfg, timesteps=400, resume=True)))
     assert second["timesteps"] >= 400 > first["timesteps"]
@@ -60,7 +60,7 @@ def test_resume_continues_from_the_last_resume_point(algo, tmp_path):
 
 
 def test_resume_needs_a_resume_point(tmp_path):
-    with pytest.raises(ValueError, match="no resume point"):
+    with pytest.raises(ValueError, match="nothing to resume"):
         train_marl(MarlConfig(**dict(TINY, out_dir=str(tmp_path / "empty"), resume=True)))
 
 
@@ -116,3 +116,17 @@ def test_potential_shaping_adds_the_distance_covered():
     # with gamma = 1 the shaping telescopes to phi(goal) - phi(start) = the start's distance, 5.5 steps
     assert totals[0] < 0 and np.isclose(totals[1] - totals[0], 5.5)
     assert shaped.state().shape == (4,) and shaped.agent_name_mapping == {"agent_0": 0}
+
+
+def test_resume_refuses_other_settings_and_overwrite_starts_anew(tmp_path):
+    out = tmp_path / "run"
+    cfg = dict(TINY, algo="mappo-lag", out_dir=str(out), timesteps=160)
+    train_marl(MarlConfig(**cfg))
+    with pytest.raises(ValueError, match='--agents: 2 there, 3 now'):
+        train_marl(MarlConfig(**dict(cfg, n_agents=3, resume=True)))
+    (out / "notes.txt").write_text("mine")
+    again = train_marl(MarlConfig(**dict(cfg, seed=5, overwrite=True)))
+    assert again["timesteps"] >= 160
+    assert json.loads((out / "config.json").read_text())["config"]["seed"] == 5 and "resumed" not in json.loads(
+        (out / "config.json").read_text())
+    assert (out / "notes.txt").read_text() == "mine"

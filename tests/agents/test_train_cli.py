@@ -54,19 +54,61 @@ def test_resume_continues_a_run_from_its_last_resume_point(tmp_path, capsys):
     assert main(["train", "--out", str(out), "--replay-save-freq", "150", *TINY]) == 0
     full = json.loads((out / "summary.json").read_text())
     state = json.loads((out / "resume" / "state.json").read_text())
-    assert state["timesteps"] == 300 and state["replay"]
-    saved = SafeGoalTD3.load(out / "resume" / "model.zip")
-    assert saved.num_timesteps == 300
+    assert state["timesteps"] == 300 and state["replay"] == "replay-300.npz"
+    assert sorted(p.name for p in (out / "resume").iterdir()) == ["model-300.zip", "replay-300.npz", "state.json"]
+    saved = SafeGoalTD3.load(out / "resume" / state["model"])
+    assert saved.num_timesteps == 300 and saved._n_updates == state["gradient_steps"] == full["gradient_steps"]
     # continue the same run to 450 steps in all: counters, buffer and evaluation log carry over
     args = [a if a != "300" else "450" for a in TINY]
     assert main(["train", "--out", str(out), "--resume", *args]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["timesteps"] == 450 and summary["wall_s"] > full["wall_s"]
-    evals = [json.loads(line)["timesteps"] for line in (out / "evaluations.jsonl").read_text().splitlines()]
-    assert evals == [150, 300, 450]
+    evals = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    assert [e["timesteps"] for e in evals] == [150, 300, 450]
+    assert evals[0]["wall_s"] <= evals[1]["wall_s"] <= evals[2]["wall_s"]  # wall time goes on, never back
     model = SafeGoalTD3.load(out / "model.zip")
-    assert model.num_timesteps == 450 and model._n_updates > saved._n_updates
-    assert (out / "config.resume.json").exists()
+    assert model.num_timesteps == 450
+    # every gradient step an uninterrupted 450-step run takes: one per step after learning_starts
+    assert summary["gradient_steps"] == model._n_updates == 450 - 100
+    config = json.loads((out / "config.json").read_text())
+    assert config["config"]["timesteps"] == 300 and config["resumed"][0]["config"]["timesteps"] == 450
+
+
+def test_a_folder_that_holds_a_run_is_refused_without_resume_or_overwrite(tmp_path, capsys):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "model.zip").write_bytes(b"an earlier model")
+    assert main(["train", "--out", str(out), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert "not empty (model.zip)" in err and "--resume" in err and "--overwrite" in err
+    assert (out / "model.zip").read_bytes() == b"an earlier model" and sorted(p.name for p in out.iterdir()) == [
+        "model.zip"]
+
+
+@pytest.mark.slow
+def test_resume_refuses_another_map_and_overwrite_starts_anew(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["train", "--out", str(out), *TINY]) == 0
+    (out / "notes.txt").write_text("mine")
+    other = [a if a != "SafeCenterDot-v0" else "SafeCentralObstacle-v0" for a in TINY]
+    assert main(["train", "--out", str(out), "--resume", *other]) == 2
+    assert "--env: \"SafeCenterDot-v0\" there, \"SafeCentralObstacle-v0\" now" in capsys.readouterr().err
+    assert main(["train", "--out", str(out), "--resume", "--seed", "9", *TINY]) == 2
+    assert "--seed: 0 there, 9 now" in capsys.readouterr().err
+    assert main(["train", "--out", str(out), "--overwrite", *other]) == 0
+    assert json.loads((out / "summary.json").read_text())["env_id"] == "SafeCentralObstacle-v0"
+    evals = [json.loads(line)["timesteps"] for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    assert evals == [150, 300]  # the earlier run's evaluations are gone
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_a_junk_init_checkpoint_is_refused_before_anything_is_written(tmp_path, capsys):
+    junk = tmp_path / "junk.zip"
+    junk.write_bytes(b"not a zip")
+    out = tmp_path / "c"
+    assert main(["train", "--stage", "constrained", "--init", str(junk), "--out", str(out), *TINY]) == 2
+    assert "junk.zip" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_resume_without_a_resume_point_says_so(tmp_path, capsys):

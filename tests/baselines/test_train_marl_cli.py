@@ -31,7 +31,7 @@ def test_train_marl_writes_the_run_and_tensorboard(tmp_path, capsys):
     (["--env", "SafeApartment0-v0"], "panorama"),
     (["--env", "SafeCentralObstacel-v0"], "did you mean 'SafeCentralObstacle-v0'"),
     (["--gamma", "2"], "gamma must be"),
-    (["--resume"], "no resume point"),
+    (["--resume"], "nothing to resume"),
 ])
 def test_train_marl_names_bad_input_before_any_work(argv, message, tmp_path, capsys):
     assert main(["train-marl", *TINY, "--out", str(tmp_path / "r"), *argv]) == 2
@@ -51,5 +51,5 @@ def test_train_marl_checks_every_seed_folder_before_the_first_run(tmp_path, caps
     (base / "s2").mkdir(parents=True)
     (base / "s2" / "checkpoint.json").write_text("{}")  # seed 2's folder already holds a run
     assert main(["train-marl", *TINY, "--seeds", "1", "2", "--out", str(base)]) == 2
-    assert "already holds a run" in capsys.readouterr().err
+    assert "is not empty (checkpoint.json)" in capsys.readouterr().err
     assert not (base / "s1").exists()

@@ -76,3 +76,38 @@ def test_expansion_limit_is_checked():
         CBSSolver(inst, expansion_limit=-1)
     res = CBSSolver(inst, expansion_limit=None).solve()
     assert res.status == "optimal"
+
+
+def test_no_clock_decides_a_plan_of_the_planner(monkeypatch):
+    """With the planner's defaults nothing reads the clock to decide: a clock that jumps an hour at every
+    read (a machine as loaded as can be) gives the same plans, also where a budget stops a solver."""
+    from scipy import sparse
+    from test_planner import _crossing_problem, euclid_pairwise, make_planner
+
+    pts = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0)), axis=-1).reshape(-1, 2)
+    planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=0.9)
+    assert planner.time_limit is None
+    starts, goals = _crossing_problem(12)
+    tight = planner.with_options(expansion_limit=300, solver="cbs", fallback_suboptimality=None)
+
+    def plans():
+        return [(p.status, p.soc, p.cbs.paths if p.cbs is not None else None, p.message)
+                for p in (planner.plan(starts, goals), tight.plan(starts, goals))]
+
+    calm = plans()
+    assert calm[1][0] == "timeout" and "expansion limit" in calm[1][3]
+    clock = [0.0]
+
+    def hasty() -> float:
+        clock[0] += 3600.0
+        return clock[0]
+
+    monkeypatch.setattr(time, "perf_counter", hasty)
+    assert plans() == calm
+    # the expansion budget shrinks on graphs denser than REFERENCE_EDGE_STEPS edge-steps per node
+    from agents.search.planner import REFERENCE_EDGE_STEPS
+
+    sparse_graph = sparse.csr_matrix(np.ones((10, 10)) * 3.0)  # 30 edge-steps per node
+    dense = sparse.csr_matrix(np.ones((10, 10)) * (6.0 * REFERENCE_EDGE_STEPS / 10))  # 6 x the reference
+    assert planner.cbs_expansion_limit(sparse_graph) == planner.expansion_limit
+    assert planner.cbs_expansion_limit(dense) == planner.expansion_limit // 6

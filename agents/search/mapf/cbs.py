@@ -16,7 +16,6 @@ heuristics in :mod:`agents.search.mapf.heuristics`. Bounded-suboptimal ECBS is i
 from __future__ import annotations
 
 import heapq
-import time as _time
 from typing import Dict, List, Optional, Sequence, Set, Tuple, Union
 
 from .classify import ConflictClassification
@@ -35,7 +34,7 @@ from .constraints import (
     LengthConstraint,
     RangeConstraint,
 )
-from .context import SearchContext
+from .context import PAIR_CHECK_MOVES, SearchContext
 from .coupled import CoupledLimit
 from .ctnode import ConflictMap, CTNode
 from .heuristics import INFEASIBLE, ConflictGraphHeuristics
@@ -294,9 +293,9 @@ class CBSSearch(MetaAgentMerging, ConflictClassification, ConflictGraphHeuristic
                         stats.hl_generated += 1
                     heapq.heappush(open_list, node)
                 continue
-            if ctx.pair_check_at is not None and not self.sub and _time.perf_counter() > ctx.pair_check_at:
+            if ctx.pair_check_at is not None and not self.sub and ctx.counter.expanded > ctx.pair_check_at:
                 ctx.pair_check_at = None
-                ctx.infeasible_reason = ctx.opt._pair_check(ctx.pair_check_deadline())
+                ctx.infeasible_reason = ctx.opt._pair_check(PAIR_CHECK_MOVES)
                 if ctx.infeasible_reason is not None:
                     return "infeasible", None
             if not node.h_done and self.heuristic != "none" and node.conflicts:

@@ -23,6 +23,12 @@ from .symmetry import Corridors, GridGeometry
 if TYPE_CHECKING:  # the solver builds the context; imported for the annotation only
     from .solver import CBSSolver
 
+#: the deferred pair feasibility check runs once a search has made this many low-level expansions
+#: (about a second of search) without a plan
+PAIR_CHECK_AFTER_EXPANSIONS = 5_000
+#: the work budget of the deferred pair feasibility check: joint moves examined over all pairs
+PAIR_CHECK_MOVES = 20_000_000
+
 #: the memory guard reads the process's resident size once every this many checks
 _MEMORY_CHECK_EVERY = 256
 
@@ -98,10 +104,10 @@ class SearchContext:
         self._corridors: Optional[Corridors] = None
         self.geometry: Optional[GridGeometry] = None
         size = options._pair_check_size()
-        #: when to run the deferred pair feasibility check (None: never)
-        self.pair_check_at: Optional[float] = (
-            _time.perf_counter() + 1.0
-            if options.pair_check_states < size <= 100 * options.pair_check_states else None)
+        #: after how many low-level expansions to run the deferred pair feasibility check (None: never)
+        self.pair_check_at: Optional[int] = (
+            PAIR_CHECK_AFTER_EXPANSIONS if options.pair_check_states < size <= 100 * options.pair_check_states
+            else None)
         self.infeasible_reason: Optional[str] = None
         if options.symmetry and inst.unit and options.grid_coords is not None:
             self.geometry = GridGeometry(inst, options.grid_coords)
@@ -122,12 +128,6 @@ class SearchContext:
                 self.compiled.clear()
             self.compiled[key] = cc
         return cc
-
-    def pair_check_deadline(self) -> float:
-        """When the deferred pair feasibility check gives up undecided: it may use a quarter of
-        the time left, so that it cannot starve a search that would have succeeded."""
-        now = _time.perf_counter()
-        return now + 0.25 * max(0.0, self.deadline - now)
 
     def check_time(self) -> None:
         """Raise :class:`SearchTimeout` past the deadline, the expansion limit or (checked now and

@@ -8,12 +8,11 @@ found is at most ``w`` times the optimum; its lower bound is kept for the result
 from __future__ import annotations
 
 import heapq
-import time as _time
 from typing import List, Optional, Sequence, Tuple
 
 from .cbs import CBSSearch
 from .constraints import EMPTY, ConstraintSet
-from .context import SearchContext
+from .context import PAIR_CHECK_MOVES, SearchContext
 from .ctnode import ConflictMap, CTNode
 from .lowlevel import focal_search
 from .paths import AgentPath, Reservation
@@ -69,9 +68,9 @@ class ECBSSearch(CBSSearch):
         self.lower_bound = root.lb
         while True:
             ctx.check_time()
-            if ctx.pair_check_at is not None and _time.perf_counter() > ctx.pair_check_at:
+            if ctx.pair_check_at is not None and ctx.counter.expanded > ctx.pair_check_at:
                 ctx.pair_check_at = None
-                ctx.infeasible_reason = ctx.opt._pair_check(ctx.pair_check_deadline())
+                ctx.infeasible_reason = ctx.opt._pair_check(PAIR_CHECK_MOVES)
                 if ctx.infeasible_reason is not None:
                     return "infeasible", None
             while open_lb and open_lb[0][2].closed:

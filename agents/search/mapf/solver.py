@@ -10,8 +10,9 @@ for the problem and the algorithm.
 from __future__ import annotations
 
 import gc
+import math
 import time as _time
-from typing import Any, Optional, Sequence, Union
+from typing import Any, List, Optional, Sequence, Union
 
 from numpy.typing import ArrayLike
 
@@ -38,12 +39,13 @@ DEFAULT_JOINT_CHECK_STATES = 20_000
 DEFAULT_MEMORY_LIMIT_MB = 4096.0
 
 
-def _pair_feasible(inst: MapfInstance, a: int, b: int, deadline: Optional[float] = None) -> Optional[bool]:
+def _pair_feasible(inst: MapfInstance, a: int, b: int, work: Optional[List[int]] = None) -> Optional[bool]:
     """Whether agents ``a`` and ``b`` alone can both reach their goals (joint-state search).
 
     Uses unit-time semantics (vertex, swap, proximity), which every durative plan can be
     serialised into, so ``False`` proves the whole instance infeasible under either model.
-    ``None``: the search reached ``deadline`` (a ``time.perf_counter()`` value) undecided.
+    ``work``: a one-element list with the joint moves the search may still examine, decreased as
+    it goes; ``None`` is returned when they run out undecided.
     """
     succ = inst.succ
     near = inst.near_mat
@@ -54,9 +56,11 @@ def _pair_feasible(inst: MapfInstance, a: int, b: int, deadline: Optional[float]
     popped = 0
     while stack:
         popped += 1
-        if deadline is not None and not popped & 4095 and _time.perf_counter() > deadline:
-            return None
         x, y = stack.pop()
+        if work is not None:
+            work[0] -= len(succ[x]) * len(succ[y])
+            if work[0] < 0:
+                return None
         if (x, y) == goal:
             return True
         for x2 in succ[x]:
@@ -87,7 +91,8 @@ class CBSSolver:
             time, 4-connected grids whose node coordinates are given as ``grid_coords``).
         grid_coords: ``(N, 2)`` integer (row, col) of every node of a 4-connected grid graph.
         vanilla: plain CBS (no prioritisation, bypass, target or symmetry reasoning, heuristic).
-        time_limit: wall-clock seconds; the search ends with status ``"timeout"``.
+        time_limit: wall-clock seconds; the search ends with status ``"timeout"`` (``None``: no wall-clock
+            limit, the budgets in work alone end it, so that the outcome never depends on the machine's load).
         memory_limit_mb: how much the process may grow (resident memory, MiB) during the
             search; past it the search ends with status ``"timeout"`` and a message saying so,
             instead of exhausting the machine's memory (long optimal searches keep every open
@@ -196,7 +201,7 @@ class CBSSolver:
         symmetry: bool = True,
         grid_coords: Optional[ArrayLike] = None,
         vanilla: bool = False,
-        time_limit: float = 60.0,
+        time_limit: Optional[float] = 60.0,
         memory_limit_mb: Optional[float] = DEFAULT_MEMORY_LIMIT_MB,
         node_limit: Optional[int] = None,
         expansion_limit: Optional[int] = None,
@@ -229,8 +234,8 @@ class CBSSolver:
             raise ValueError(f"heuristic must be one of {HEURISTICS}, got {heuristic!r}")
         if not (suboptimality >= 1.0):
             raise ValueError(f"suboptimality must be >= 1, got {suboptimality!r}")
-        if not (time_limit > 0):
-            raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+        if time_limit is not None and not (time_limit > 0):
+            raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
         if memory_limit_mb is not None and not (memory_limit_mb > 0):
             raise ValueError(f"memory_limit_mb must be > 0 (or None for no limit), got {memory_limit_mb!r}")
         if node_limit is not None and node_limit < 0:
@@ -263,7 +268,7 @@ class CBSSolver:
         self.grid_coords = grid_coords
         if grid_coords is not None:
             GridGeometry(self.instance, grid_coords)  # validate now: a clear error early
-        self.time_limit = float(time_limit)
+        self.time_limit = None if time_limit is None else float(time_limit)
         self.memory_limit_mb = None if memory_limit_mb is None else float(memory_limit_mb)
         self.node_limit = node_limit
         self.expansion_limit = expansion_limit
@@ -314,15 +319,17 @@ class CBSSolver:
         k = self.instance.n_agents
         return k * (k - 1) // 2 * self.instance.n_nodes ** 2
 
-    def _pair_check(self, deadline: Optional[float] = None) -> Optional[str]:
+    def _pair_check(self, moves: Optional[int] = None) -> Optional[str]:
         """Why some pair of agents cannot both reach their goals, or ``None`` (also when the
-        check reaches ``deadline`` undecided: it never makes a search overrun its time limit)."""
+        check has examined ``moves`` joint moves undecided: a budget counted in work, so that the
+        outcome never depends on the machine's load)."""
         inst = self.instance
         k = inst.n_agents
+        work = None if moves is None else [int(moves)]
         for a in range(k):
             for b in range(a + 1, k):
-                ok = _pair_feasible(inst, a, b, deadline)
-                if ok is None:  # out of time: undecided
+                ok = _pair_feasible(inst, a, b, work)
+                if ok is None:  # out of budget: undecided
                     return None
                 if not ok:
                     return (f"agents {a} and {b} cannot both reach their goals: every plan of the two makes them "
@@ -345,7 +352,7 @@ class CBSSolver:
     def _solve(self) -> CBSResult:
         t0 = _time.perf_counter()
         inst = self.instance
-        ctx = SearchContext(inst, t0 + self.time_limit, self)
+        ctx = SearchContext(inst, math.inf if self.time_limit is None else t0 + self.time_limit, self)
         stats = ctx.stats
 
         def finish(res: CBSResult) -> CBSResult:
@@ -388,7 +395,7 @@ class CBSSolver:
                 msg = (f"memory limit reached: the search grew the process by more than "
                        f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
             else:
-                msg = f"time limit of {self.time_limit:g} s reached"
+                msg = f"time limit of {self.time_limit} s reached"
             return finish(CBSResult("timeout", lower_bound=lb, message=msg))
         if status == "infeasible":
             msg = ctx.infeasible_reason or "the constraint tree was exhausted: no solution exists"
@@ -417,7 +424,7 @@ def solve_cbs(
     time_model: str = "unit",
     proximity: ProximityLike = None,
     suboptimality: float = 1.0,
-    time_limit: float = 60.0,
+    time_limit: Optional[float] = 60.0,
     node_limit: Optional[int] = None,
     vanilla: bool = False,
     **options: Any,
