@@ -199,7 +199,8 @@ class PeriodicEvaluation(BaseCallback):
 
     def _on_training_start(self) -> None:
         self._env = _make_env(self.env_id)
-        self._last = self.num_timesteps
+        # on the run's own grid of eval_freq steps, also when it resumes between two evaluations
+        self._last = self.num_timesteps - self.num_timesteps % self.eval_freq
 
     def _on_step(self) -> bool:
         if self.num_timesteps - self._last >= self.eval_freq:

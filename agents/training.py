@@ -406,7 +406,7 @@ def _make_callbacks(cfg: "TrainConfig", out: str, eval_log: str, resume: ResumeC
             self._last = 0
 
         def _on_training_start(self) -> None:
-            self._last = self.num_timesteps
+            self._last = self.num_timesteps - self.num_timesteps % freq if freq > 0 else self.num_timesteps
 
         def _on_rollout_start(self) -> None:
             if freq > 0 and self.num_timesteps - self._last >= freq:

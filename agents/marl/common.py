@@ -14,7 +14,7 @@ import numpy as np
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from ..run_folder import RunFolder as OutputFolder
-from ..run_folder import read_json, read_json_lines, write_atomic, write_json_atomic
+from ..run_folder import atomic_output, read_json, read_json_lines, write_atomic, write_json_atomic
 from .config import MarlConfig
 
 #: file suffix of each algorithm's weights (an SB3 zip for IPPO, a torch file for MAPPO-Lagrangian)
@@ -223,6 +223,17 @@ class RunFolder:
         return {"algo": cfg.algo, "env_id": cfg.env_id, "n_agents": cfg.n_agents, "obs_dim": int(obs_dim),
                 "timesteps": int(steps), "wall_s": round(self.wall(), 1), "config": asdict(cfg),
                 "command": self.command, **(extra or {})}
+
+    def save_file(self, save: Callable[[str], Any], path: Path) -> None:
+        """Write a policy file with ``save(path)``, whole or not at all (a temporary file, then a rename)."""
+        with atomic_output(path) as tmp:
+            save(str(tmp))
+
+    def save_checkpoint(self, save: Callable[[str], Any], steps: int, obs_dim: int,
+                        extra: Optional[Dict[str, Any]] = None) -> None:
+        """A resume point: the checkpoint file (:meth:`save_file`), then its description."""
+        self.save_file(save, self.checkpoint)
+        self.save_meta("checkpoint", self.meta(steps, obs_dim, extra))
 
     def save_meta(self, name: str, meta: Dict[str, Any]) -> None:
         write_json_atomic(self.out / f"{name}.json", meta, indent=1)

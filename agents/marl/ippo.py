@@ -64,8 +64,7 @@ def train_ippo(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
             if cfg.eval_freq and self.num_timesteps - self.last >= cfg.eval_freq:
                 self.last = self.num_timesteps
                 ev = run.evaluate(act, self.num_timesteps)
-                model.save(str(run.checkpoint))
-                run.save_meta("checkpoint", run.meta(self.num_timesteps, obs_dim))
+                run.save_checkpoint(model.save, self.num_timesteps, obs_dim)
                 if run.bar is not None:
                     run.bar.set_postfix_str(f"success={ev['success_rate']:.2f} cost={ev['mean_cost']:.2f}")
             return True
@@ -74,10 +73,9 @@ def train_ippo(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
     remaining = max(cfg.timesteps - run.start_steps, 0)
     model.learn(remaining, callback=Periodic(), reset_num_timesteps=run.start_steps == 0, tb_log_name="ippo")
     steps = int(model.num_timesteps)
-    model.save(str(run.out / "model.zip"))
+    run.save_file(model.save, run.out / "model.zip")
     run.evaluate(act, steps)
-    model.save(str(run.checkpoint))
-    run.save_meta("checkpoint", run.meta(steps, obs_dim))
+    run.save_checkpoint(model.save, steps, obs_dim)
     venv.close()
     return run.finish(steps, obs_dim)
 

@@ -219,16 +219,14 @@ def train_mappo_lag(cfg: MarlConfig, run: RunFolder) -> Dict[str, Any]:
         if cfg.eval_freq and steps - last_eval >= cfg.eval_freq and steps < cfg.timesteps:
             last_eval = steps
             ev = run.evaluate(act, steps, {"lagrange": lagrange})
-            save(run.checkpoint)
-            run.save_meta("checkpoint", run.meta(steps, envs.obs_dim, {"lagrange_multiplier": lagrange}))
+            run.save_checkpoint(save, steps, envs.obs_dim, {"lagrange_multiplier": lagrange})
             if run.bar is not None:
                 run.bar.set_postfix_str(f"success={ev['success_rate']:.2f} cost={ev['mean_cost']:.2f} "
                                         f"lambda={lagrange:.2f}")
     envs.close()
     run.evaluate(act, steps, {"lagrange": lagrange})
-    save(run.checkpoint)
-    run.save_meta("checkpoint", run.meta(steps, envs.obs_dim, {"lagrange_multiplier": lagrange}))
-    save(run.out / "model.pt")
+    run.save_checkpoint(save, steps, envs.obs_dim, {"lagrange_multiplier": lagrange})
+    run.save_file(save, run.out / "model.pt")
     return run.finish(steps, envs.obs_dim, {"lagrange_multiplier": lagrange})
 
 

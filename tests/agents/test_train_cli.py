@@ -234,3 +234,34 @@ def test_parked_agents_reach_the_training_env(tmp_path):
         TrainConfig(parked_agents=-1).validate()
     with pytest.raises(ValueError, match="parked_fraction"):
         TrainConfig(parked_agents=2, parked_fraction=2.0).validate()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay", [0.0, 0.7])
+def test_a_killed_run_resumes_to_one_run_on_one_map(tmp_path, delay):
+    import os
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    args = ["train", "--out", str(out), "--replay-save-freq", "100", *[a if a != "300" else "600" for a in TINY]]
+    runner = "import sys; from baselines.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.Popen([sys.executable, "-c", runner, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    t0 = time.monotonic()
+    while not (out / "resume" / "state.json").exists() and proc.poll() is None and time.monotonic() - t0 < 300:
+        time.sleep(0.02)
+    time.sleep(delay)
+    proc.kill()  # SIGKILL: no chance to clean up
+    proc.wait()
+    assert proc.returncode != 0, "the run ended before it was killed"
+    assert main([*args, "--resume"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["env_id"] == "SafeCenterDot-v0" and summary["timesteps"] == 600
+    assert summary["gradient_steps"] == 600 - 100  # one per step after learning_starts, as without the kill
+    evals = [json.loads(line)["timesteps"] for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    assert evals == [150, 300, 450, 600]
+    model = SafeGoalTD3.load(out / "model.zip")
+    assert model.env_id == "SafeCenterDot-v0" and model.num_timesteps == 600
+    assert not [p.name for p in out.rglob(".*tmp*")]  # no temporary file left behind by the finished run
