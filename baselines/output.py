@@ -43,6 +43,15 @@ def check_output_dir(path: Union[str, os.PathLike], flag: str = "--out") -> Path
     return out
 
 
+def add_resume_arguments(parser: Any, resume_help: str) -> None:
+    """``--resume`` (with ``resume_help``) and ``--overwrite`` for a command that owns its ``--out``
+    (:class:`agents.run_folder.RunFolder`)."""
+    parser.add_argument("--resume", action="store_true", help=resume_help)
+    parser.add_argument("--overwrite", action="store_true",
+                        help="start anew in an --out that holds an earlier run: the files that run wrote are removed "
+                             "first (without --resume or --overwrite, an --out that holds files is refused)")
+
+
 #: Where the figure scripts write unless asked to refresh the README's pictures.
 FIGURES_OUT = Path("figures_out")
 

@@ -8,7 +8,9 @@ obstacle cost integrated along the straight segment. Its policy heads straight f
 from __future__ import annotations
 
 import runpy
+import struct
 import sys
+import zipfile
 
 import numpy as np
 import pytest
@@ -72,3 +74,19 @@ def run_example(capsys):
         return done.value.code, capsys.readouterr()
 
     return run
+
+
+@pytest.fixture
+def flip_byte():
+    """``flip(src, dst, member)``: a copy of the zip archive ``src`` at ``dst`` with one bit flipped in the
+    middle of ``member``'s compressed bytes (a corrupt file that still opens as a zip); returns ``dst``."""
+
+    def flip(src, dst, member):
+        raw = bytearray(src.read_bytes())
+        info = zipfile.ZipFile(src).getinfo(member)
+        n, m = struct.unpack("<HH", raw[info.header_offset + 26:info.header_offset + 30])
+        raw[info.header_offset + 30 + n + m + info.compress_size // 2] ^= 0x40
+        dst.write_bytes(bytes(raw))
+        return dst
+
+    return flip

@@ -4,13 +4,13 @@ Above both trainers (:mod:`agents.marl.ippo`, :mod:`agents.marl.mappo_lag`), who
 """
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional
 
 import numpy as np
 
+from ..run_folder import read_json
 from .common import SUFFIX, Act, flat_observations
 from .config import ALGOS
 from .ippo import load_ppo, ppo_act
@@ -64,10 +64,7 @@ def load_marl(path: str, env_id: Optional[str] = None) -> MarlAgent:
         raise ValueError(f"no MARL checkpoint at {path}")
     if not meta_path.exists():
         raise ValueError(f"{path}: its description {meta_path.name} is missing (written next to it by train-marl)")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{meta_path} is not a readable description (truncated or corrupt JSON: {exc})") from exc
+    meta = read_json(meta_path, what="policy description")
     if not isinstance(meta, dict):
         raise ValueError(f"{meta_path} is not a description of a MARL policy (not a JSON object)")
     missing = [k for k in ("algo", "env_id", "obs_dim") if k not in meta]

@@ -12,6 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from agents.search.mapf import SPREAD_MODES
     from baselines.evaluation import DIFFICULTIES
     from baselines.methods import DEFAULT_METHODS, MARL_METHODS, METHODS, PAPER_METHODS
+    from baselines.output import add_resume_arguments
 
     p = sub.add_parser("evaluate", help="compare the methods on the same problems (Tables I and II, Figure 1)",
                        description=run.__doc__)
@@ -92,12 +93,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "shows what the agents do without it)")
     p.add_argument("--max-cycles", type=_positive, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the evaluation in --out: the runs already in its runs.csv are kept and not run "
-                        "again (the settings that decide the rows must be those of the evaluation there)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="start anew in an --out that holds an earlier evaluation: the files it wrote are removed "
-                        "first (without --resume or --overwrite, an --out that holds files is refused)")
+    add_resume_arguments(p, "continue the evaluation in --out: the runs already in its runs.csv are kept and not "
+                            "run again (the settings that decide the rows must be those of the evaluation there)")
     p.add_argument("--figure", action=argparse.BooleanOptionalAction, default=True,
                    help="also draw the trajectory figure (default on)")
     p.add_argument("--video", action="store_true",

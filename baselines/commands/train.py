@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Optional
 
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.training import TrainConfig
+    from baselines.output import add_resume_arguments
 
     d = TrainConfig()
     p = sub.add_parser(
@@ -98,12 +99,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="geodesic limit of the correlation pairs (default: 4 m on the apartments, 15 on the 2D maps)")
     g.add_argument("--eval-seed", type=int, default=d.eval_seed)
     g.add_argument("--threads", type=int, default=d.threads, help="torch threads")
-    g.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its last resume point, up to --timesteps steps in all "
-                        "(with the run's own settings; --timesteps, --threads and the output options may change)")
-    g.add_argument("--overwrite", action="store_true",
-                   help="start anew in an --out that holds an earlier run: the files that run wrote are removed "
-                        "first (without --resume or --overwrite, an --out that holds files is refused)")
+    add_resume_arguments(g, "continue the run in --out from its last resume point, up to --timesteps steps in all "
+                            "(with the run's own settings; --timesteps, --threads and the output options may change)")
     g.add_argument("--replay-save-freq", type=int, default=None,
                    help="steps between resume points (model and replay buffer; default: --eval-freq; 0: never)")
     g.add_argument("--no-progress", dest="progress_bar", action="store_false",

@@ -9,6 +9,7 @@ import sys
 
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.marl.config import ALGOS, MarlConfig
+    from baselines.output import add_resume_arguments
 
     d = MarlConfig()
     p = sub.add_parser(
@@ -30,12 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", dest="out_dir", default=None,
                    help="output folder (default runs/<env>-<algo>-s<seed>): model.zip or model.pt with model.json, "
                         "checkpoint files, config.json, evaluations.jsonl, summary.json")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its last resume point, up to --timesteps agent steps in all "
-                        "(with the run's own settings; --timesteps, --threads and the output options may change)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="start anew in an --out that holds an earlier run: the files that run wrote are removed "
-                        "first (without --resume or --overwrite, an --out that holds files is refused)")
+    add_resume_arguments(p, "continue the run in --out from its last resume point, up to --timesteps agent steps "
+                            "in all (with the run's own settings; --timesteps, --threads and the output options may "
+                            "change)")
     g = p.add_argument_group("learning")
     g.add_argument("--max-cycles", type=_int, default=d.max_cycles, help="steps per training episode")
     g.add_argument("--goal-distance", type=float, nargs=2, metavar=("LO", "HI"), default=None,

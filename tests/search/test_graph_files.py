@@ -1,8 +1,6 @@
 """Graph files record where they were made and are checked whole on loading: corrupt, foreign,
 NaN or out-of-map files are refused naming the file; bad planner options name the valid ones."""
 import copy
-import struct
-import zipfile
 
 import numpy as np
 import pytest
@@ -30,15 +28,6 @@ def models(stand_in_models):
 @pytest.fixture
 def nodes():
     return np.random.default_rng(0).uniform(0.05, 0.95, (30, 2)).astype(np.float32)
-
-
-def flip_a_byte_inside(src, dst, member):
-    raw = bytearray(src.read_bytes())
-    info = zipfile.ZipFile(src).getinfo(member)
-    n, m = struct.unpack("<HH", raw[info.header_offset + 26:info.header_offset + 30])
-    raw[info.header_offset + 30 + n + m + info.compress_size // 2] ^= 0x40
-    dst.write_bytes(bytes(raw))
-    return dst
 
 
 def rewrite_npz(src, dst, **changes):
@@ -87,7 +76,7 @@ def test_nan_or_out_of_map_nodes_are_refused(nodes, models, tmp_path, bad, match
         SearchPolicy.load(policy_path, critic)
 
 
-def test_truncated_or_flipped_graph_files_name_the_file(nodes, tmp_path):
+def test_truncated_or_flipped_graph_files_name_the_file(nodes, tmp_path, flip_byte):
     g = WaypointGraph.from_matrices(np.full((30, 30), 1.0), d_max=2.0, observations=nodes)
     path = tmp_path / "g.npz"
     g.save(path)
@@ -95,12 +84,12 @@ def test_truncated_or_flipped_graph_files_name_the_file(nodes, tmp_path):
     cut.write_bytes(path.read_bytes()[:-100])
     with pytest.raises(ValueError, match="cut.npz: it is not a waypoint graph file .*truncated or corrupt"):
         WaypointGraph.load(cut)
-    flipped = flip_a_byte_inside(path, tmp_path / "flip.npz", "observations.npy")
+    flipped = flip_byte(path, tmp_path / "flip.npz", "observations.npy")
     with pytest.raises(ValueError, match="flip.npz: it is not a waypoint graph file .*truncated or corrupt"):
         WaypointGraph.load(flipped)
 
 
-def test_a_search_policy_file_records_its_env_and_is_checked_whole(nodes, models, tmp_path):
+def test_a_search_policy_file_records_its_env_and_is_checked_whole(nodes, models, tmp_path, flip_byte):
     critic, other = models
     policy = SearchPolicy.from_models(critic, critic, nodes, seed=0)
     path = policy.save(tmp_path / "p")
@@ -118,7 +107,7 @@ def test_a_search_policy_file_records_its_env_and_is_checked_whole(nodes, models
     cut.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
     with pytest.raises(ValueError, match="cut.npz: it is not a saved SearchPolicy graph .*truncated or corrupt"):
         SearchPolicy.load(cut, critic)
-    flipped = flip_a_byte_inside(path, tmp_path / "flip.npz", "D.npy")
+    flipped = flip_byte(path, tmp_path / "flip.npz", "D.npy")
     with pytest.raises(ValueError, match="flip.npz.*truncated or corrupt"):
         SearchPolicy.load(flipped, critic)
     short = rewrite_npz(path, tmp_path / "short.npz", C=np.zeros((29, 29)))
