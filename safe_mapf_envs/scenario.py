@@ -6,7 +6,6 @@ from __future__ import annotations
 from typing import Any, Dict, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .checks import check_band, check_count, check_number, plural, show, show_point
 from .cost import ObstacleField
@@ -415,6 +414,8 @@ class NavigationScenario:
     def _greedy_scan(self, s: float, max_cost: Optional[float], base: np.ndarray, across: bool) -> np.ndarray:
         """``base`` plus every allowed point of a grid of spacing ``s / 8`` that is at least ``s`` from
         the points taken before it, scanned row by row (column by column when ``across``)."""
+        from scipy.spatial import cKDTree  # here: importing the package stays light
+
         r, d = self.agent_radius, s / 8.0
         w, h = self.size[::-1] if across else self.size
         xs = r + np.arange(int(np.floor((w - 2 * r) / d)) + 1) * d
@@ -466,6 +467,8 @@ class NavigationScenario:
         depends on the generator alone. ``what`` and ``separation_name`` name the positions and
         the separation in messages.
         """
+        from scipy.spatial import cKDTree
+
         n = check_count(n, "n", 0)
         sep = float(separation)
         fit = self.capacity(sep, max_cost)
@@ -495,6 +498,8 @@ class NavigationScenario:
                           moves: int = 40) -> np.ndarray:
         """``n`` random positions of :meth:`packing`, each then moved ``moves`` times at random
         (up to ``sep / 4`` per axis) where the move keeps it allowed and ``sep`` from the others."""
+        from scipy.spatial import cKDTree
+
         slots = self.packing(sep, max_cost)
         pts = slots[rng.choice(len(slots), size=n, replace=False)]
         sep2 = sep * sep
