@@ -489,11 +489,10 @@ class BufferPlanner:
         reach its goal from.
         """
         t0 = time.perf_counter()
-        for name, ends in (("start", starts), ("goal", goals)):
-            same = _same_rows(ends)
-            if same is not None:
-                raise ValueError(f"agents {same[0]} and {same[1]} have the same {name}: no plan brings both there "
-                                 "(every agent needs a place of its own)")
+        same = _same_rows(check_endpoints(self.observations, starts, goals)[1])
+        if same is not None:
+            raise ValueError(f"agents {same[0]} and {same[1]} have the same goal: no plan brings both there (every "
+                             "agent needs a place of its own)")
         problem = self.problem_graph(starts, goals, exclude, exclude_edges, avoid, detached, goal_detached)
         k = problem.n_agents
         s_ids, g_ids = problem.start_ids, problem.goal_ids

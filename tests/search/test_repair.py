@@ -560,13 +560,14 @@ def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_
     policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
                           repair_routes=repair)
     start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
+    goal_1 = goal + np.array([0.0, 0.5], np.float32)  # goals of their own, side by side
     t = 0
 
     def step(first, second):
         nonlocal t
         t += 1
         policy.predict({"agent_0": {"observation": first, "desired_goal": goal},
-                        "agent_1": {"observation": second, "desired_goal": goal}})
+                        "agent_1": {"observation": second, "desired_goal": goal_1}})
 
     step(start, start)
     route = list(policy.routes["agent_0"])
