@@ -74,8 +74,9 @@ AUTO_SEARCH_AGENTS = 20
 DEFAULT_EXPANSION_LIMIT = 50_000
 #: edge-steps per node (the sum of the problem graph's edge durations over its nodes) up to which one
 #: CBS / ECBS call may make ``expansion_limit`` expansions; on a denser graph, where an expansion scans
-#: more edges, the call may make proportionally fewer (the 2D maps' 1000-node graphs have up to about 300)
-REFERENCE_EDGE_STEPS = 300
+#: more edges, the call may make proportionally fewer (1000-node graphs: CentralObstacle about 290,
+#: the apartments up to about 480, CenterDot's small room about 2,200)
+REFERENCE_EDGE_STEPS = 600
 #: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
 #: 64,000 to 426,000 safe-interval expansions (hard problems; 222 agents, the most the
 #: 1000-node graph places, are not solved)
