@@ -41,6 +41,7 @@ def write_atomic(path: PathLike, data: Union[str, bytes]) -> None:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())  # as a file opened for writing gets (mkstemp's is private)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -62,6 +63,12 @@ def atomic_output(path: PathLike) -> Iterator[Path]:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def write_json_atomic(path: PathLike, obj: Any, indent: Optional[int] = 2) -> None:

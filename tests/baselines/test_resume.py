@@ -144,3 +144,11 @@ def test_checks_come_before_any_work_and_name_the_flag(tmp_path, capsys, monkeyp
 def test_resume_command_adds_resume_and_drops_overwrite():
     assert resume_command(["evaluate", "--out", "a b", "--overwrite"]) == "safe-mapf evaluate --out 'a b' --resume"
     assert resume_command(["train", "--resume"]) == "safe-mapf train --resume"
+
+
+def test_files_written_whole_get_the_usual_permissions(tmp_path):
+    from agents.run_folder import write_atomic
+
+    write_atomic(tmp_path / "a.txt", "text")
+    (tmp_path / "b.txt").write_text("text")
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == (tmp_path / "b.txt").stat().st_mode & 0o777
