@@ -101,6 +101,11 @@ def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
     return None
 
 
+def _scaled(limit: Optional[int], scale: float) -> Optional[int]:
+    """A budget times ``scale`` (at least 1; ``None``: none)."""
+    return None if limit is None else (limit if scale >= 1.0 else max(1, int(limit * scale)))
+
+
 def _times(per_agent: Optional[int], k: int) -> Optional[int]:
     """A solve's work budget from a per-agent one (``None``: no limit)."""
     return None if per_agent is None else per_agent * k
@@ -226,10 +231,10 @@ class BufferPlanner:
             ``"timeout"``; not the repair: where prioritised planning gives up on the 1000-node buffer graph, the
             repair spent its whole budget, about a minute, and solved none).
         expansion_limit: the work budget of one CBS / ECBS call, in low-level expansions (space-time states;
-            ``None``: none), on graphs of up to ``REFERENCE_EDGE_STEPS`` edge-steps per node; on denser graphs the
-            call makes proportionally fewer, so that the edges it scans stay within the same budget. Counted in
-            work, not seconds, so the same problem gives the same plan (or the same timeout) on an idle and a
-            loaded machine.
+            ``None``: none), on graphs of up to ``REFERENCE_EDGE_STEPS`` edge-steps per node; on denser graphs
+            this budget and the three below are proportionally smaller (:meth:`work_scale`), so that the edges a
+            call scans stay within the same budget. Counted in work, not seconds, so the same problem gives the
+            same plan (or the same timeout) on an idle and a loaded machine.
         prioritized_expansions_per_agent: the work budget of prioritised planning, in safe-interval expansions over
             all agents and restarts, per agent (``None``: none).
         repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in search expansions over
@@ -526,57 +531,60 @@ class BufferPlanner:
         k = len(s_ids)
         prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
         inst = MapfInstance(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox)
+        scale = self.work_scale(durations)  # every budget in the same work on dense graphs
         solver = self.solver
         auto = solver == "auto"
         if auto:
             solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
         if solver == "lns":
-            return self._repair(inst), "lns"
+            return self._repair(inst, scale), "lns"
         if solver == "pibt":
-            return self._step(inst), "pibt"
+            return self._step(inst, scale), "pibt"
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
-            res = solve_prioritized(inst, expansion_limit=_times(self.prioritized_expansions_per_agent, k),
-                                    time_limit=self.time_limit)
+            res = solve_prioritized(inst, expansion_limit=_scaled(_times(self.prioritized_expansions_per_agent, k),
+                                                                  scale), time_limit=self.time_limit)
             if auto and res.status == "timeout":
-                stepped = self._step(inst)
+                stepped = self._step(inst, scale)
                 stepped.message = f"{stepped.message} (after prioritized: {res.message})"
                 return stepped, "pibt"
         else:
             fb = self.fallback_suboptimality
-            limit = self.cbs_expansion_limit(durations)
+            limit = _scaled(self.expansion_limit, scale)
             for w in (self.suboptimality,) if fb is None or fb <= self.suboptimality else (self.suboptimality, fb):
                 res = CBSSolver(inst, suboptimality=w, time_limit=self.time_limit, expansion_limit=limit,
                                 spread=self.spread_routes).solve()
                 if res.status != "timeout":
                     break
         if auto and solver == "cbs" and res.status == "timeout":
-            repaired = self._repair(inst)
+            repaired = self._repair(inst, scale)
             repaired.message = f"{repaired.message} (after {solver}: {res.message})"
             return repaired, "lns"
         return res, solver
 
+    @staticmethod
+    def work_scale(durations: sparse.csr_matrix) -> float:
+        """The share of its expansion budgets a solver call may spend on a problem graph with these edge
+        durations: 1 up to ``REFERENCE_EDGE_STEPS`` edge-steps per node, less on denser graphs, where
+        an expansion scans proportionally more edges."""
+        density = float(durations.data.sum()) / max(1, durations.shape[0])
+        return 1.0 if density <= REFERENCE_EDGE_STEPS else REFERENCE_EDGE_STEPS / density
+
     def cbs_expansion_limit(self, durations: sparse.csr_matrix) -> Optional[int]:
         """The expansion budget of one CBS / ECBS call on a problem graph with these edge durations:
-        ``expansion_limit``, scaled down where the graph has more than ``REFERENCE_EDGE_STEPS``
-        edge-steps per node."""
-        if self.expansion_limit is None:
-            return None
-        density = float(durations.data.sum()) / max(1, durations.shape[0])
-        if density <= REFERENCE_EDGE_STEPS:
-            return self.expansion_limit
-        return max(1, int(self.expansion_limit * REFERENCE_EDGE_STEPS / density))
+        ``expansion_limit`` times :meth:`work_scale`."""
+        return _scaled(self.expansion_limit, self.work_scale(durations))
 
-    def _repair(self, inst: MapfInstance) -> CBSResult:
-        """The large-neighbourhood repair with this planner's budget and seed."""
-        return solve_lns(inst, expansion_limit=_times(self.repair_expansions_per_agent, inst.n_agents),
+    def _repair(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
+        """The large-neighbourhood repair with this planner's budget (times ``scale``) and seed."""
+        return solve_lns(inst, expansion_limit=_scaled(_times(self.repair_expansions_per_agent, inst.n_agents), scale),
                          time_limit=self.time_limit, seed=self.repair_seed)
 
-    def _step(self, inst: MapfInstance) -> CBSResult:
-        """The priority inheritance stepper with this planner's budget."""
-        return solve_pibt(inst, expansion_limit=_times(self.stepper_expansions_per_agent, inst.n_agents),
-                          time_limit=self.time_limit)
+    def _step(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
+        """The priority inheritance stepper with this planner's budget (times ``scale``)."""
+        return solve_pibt(inst, expansion_limit=_scaled(_times(self.stepper_expansions_per_agent, inst.n_agents),
+                                                        scale), time_limit=self.time_limit)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

@@ -111,3 +111,4 @@ def test_no_clock_decides_a_plan_of_the_planner(monkeypatch):
     dense = sparse.csr_matrix(np.ones((10, 10)) * (6.0 * REFERENCE_EDGE_STEPS / 10))  # 6 x the reference
     assert planner.cbs_expansion_limit(sparse_graph) == planner.expansion_limit
     assert planner.cbs_expansion_limit(dense) == planner.expansion_limit // 6
+    assert planner.work_scale(sparse_graph) == 1.0 and planner.work_scale(dense) == 1 / 6
