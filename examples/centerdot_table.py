@@ -31,7 +31,7 @@ from baselines.paper_tables import TABLE1, TABLE1_METHODS
 
 def run_files(folder: Path) -> List[Path]:
     """The ``runs.csv`` of an evaluation folder, or those of its subfolders (one per agent count,
-    as ``examples/table1/centerdot_strict`` holds them); ``ValueError`` naming the folder if none."""
+    as an evaluation run one agent count at a time leaves them); ``ValueError`` naming the folder if none."""
     if (folder / "runs.csv").is_file():
         return [folder / "runs.csv"]
     found = sorted(folder.glob("*/runs.csv"))

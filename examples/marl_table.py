@@ -5,8 +5,8 @@
         --no-figure --out examples/table1/marl/centerdot_strict
     safe-mapf evaluate --protocol paper --env SafeCenterDot-v0 --agents 1 5 10 20 --problems 50 \\
         --methods ippo mappo_lag --out examples/table1/marl/centerdot_paper
-    python examples/marl_table.py examples/table1/centerdot_strict/agents_1_5_10/runs.csv \\
-        examples/table1/centerdot_strict/agents_20/runs.csv examples/table1/marl/centerdot_strict/runs.csv
+    python examples/marl_table.py examples/table1/centerdot_strict/runs.csv \\
+        examples/table1/marl/centerdot_strict/runs.csv
     python examples/marl_table.py --protocol paper examples/table1/centerdot_paper/runs.csv \\
         examples/table1/marl/centerdot_paper/runs.csv
 
