@@ -48,7 +48,8 @@ def run_cell(args: argparse.Namespace, cell: Cell) -> float:
     cmd = [sys.executable, "-m", "baselines.cli", "evaluate", "--protocol", "paper", "--env", args.env,
            "--agents", str(cell[0]), "--difficulty", cell[1], "--problems", str(args.problems),
            "--seed", str(args.seed), "--nodes", str(args.nodes), "--paper-candidates", str(args.paper_candidates),
-           "--methods", *args.methods, "--no-figure", "--no-progress", "--out", str(folder)]
+           "--methods", *args.methods, "--no-figure", "--no-progress", "--out", str(folder),
+           *(["--resume"] if (folder / "run.json").exists() else [])]  # a cell an interruption cut short goes on
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     t0 = time.perf_counter()
     with open(folder.with_suffix(".log"), "w") as log:
