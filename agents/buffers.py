@@ -216,12 +216,13 @@ class GoalCostReplayBuffer(DictReplayBuffer):
         """Restore transitions written by :meth:`save_arrays` (``ValueError`` naming ``path`` if the
         file is missing, truncated or corrupt, holds non-finite values, or does not fit). The file
         is read whole, without pickle, before anything is restored."""
+        from .run_folder import read_npz
+
+        data = read_npz(path, "replay-buffer file")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: np.asarray(z[k]) for k in z.files}
             pos, full, size, n_envs = (int(v) for v in data["meta"])
-        except Exception as exc:  # noqa: BLE001 (a corrupt file of any kind)
-            raise ValueError(f"{path} is not a readable replay-buffer file: {exc}") from exc
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path} is not a replay-buffer file: its 'meta' entry is missing or malformed") from exc
         for k, arr in data.items():
             if arr.dtype.kind == "f" and not np.isfinite(arr).all():
                 raise ValueError(f"{path}: its array {k!r} holds non-finite values (NaN or infinity)")

@@ -226,11 +226,11 @@ class PeriodicEvaluation(BaseCallback):
             os.makedirs(os.path.dirname(os.path.abspath(self.log_path)), exist_ok=True)
             with open(self.log_path, "a") as f:
                 f.write(json.dumps(metrics) + "\n")
-        if self.save_path:  # whole or not at all: a temporary file, then a rename
-            folder, name = os.path.split(self.save_path)
-            tmp = os.path.join(folder, f".{name}.tmp.zip")
-            self.model.save(tmp)
-            os.replace(tmp, self.save_path)
+        if self.save_path:
+            from .run_folder import atomic_output
+
+            with atomic_output(self.save_path) as tmp:  # whole or not at all
+                self.model.save(tmp)
         return metrics
 
 

@@ -10,7 +10,8 @@ new run may do with the folder:
 * ``resume``: the recorded settings are compared with the new ones, and any difference in a setting
   that matters is refused, naming it.
 
-:func:`write_atomic` writes a file whole or not at all (a temporary file in the same folder, then
+:func:`read_json`, :func:`read_json_lines` and :func:`read_npz` read a run's files with errors that
+name the file. :func:`write_atomic` writes a file whole or not at all (a temporary file in the same folder, then
 a rename), so that a run killed at any moment leaves either the old file or the new one.
 """
 from __future__ import annotations
@@ -20,9 +21,12 @@ import fnmatch
 import json
 import os
 import shutil
-import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequence, Union
+
+import numpy as np
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -33,22 +37,11 @@ class OutputFolderError(ValueError):
 
 def write_atomic(path: PathLike, data: Union[str, bytes]) -> None:
     """Write ``data`` to ``path`` whole or not at all: a temporary file beside it, then a rename."""
-    path = Path(path)
-    mode = "wb" if isinstance(data, bytes) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, mode) as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # as a file opened for writing gets (mkstemp's is private)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    with atomic_output(path) as tmp:
+        if isinstance(data, bytes):
+            tmp.write_bytes(data)
+        else:
+            tmp.write_text(data)
 
 
 @contextlib.contextmanager
@@ -63,12 +56,6 @@ def atomic_output(path: PathLike) -> Iterator[Path]:
     finally:
         if tmp.exists():
             tmp.unlink()
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def write_json_atomic(path: PathLike, obj: Any, indent: Optional[int] = 2) -> None:
@@ -86,6 +73,20 @@ def read_json(path: PathLike, what: str = "file") -> Any:
                          "it may have been cut off") from None
     except UnicodeDecodeError:
         raise ValueError(f"{what} {str(path)!r} is not a text file") from None
+
+
+def read_npz(path: PathLike, what: str) -> Dict[str, np.ndarray]:
+    """Every array of the ``.npz`` file at ``path``, read whole (each member checked against its
+    checksum) without pickle; a missing, truncated or corrupt file raises ``ValueError`` naming
+    ``path`` (``what`` says what the file should be)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: np.asarray(z[k]) for k in z.files}
+    except FileNotFoundError as exc:
+        raise ValueError(f"no {what} at {path}") from exc
+    except (OSError, KeyError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
+        raise ValueError(f"cannot read {path}: it is not a {what} (not an .npz file, or truncated or corrupt: "
+                         f"{type(exc).__name__}: {exc})") from exc
 
 
 def read_json_lines(path: PathLike) -> List[Dict[str, Any]]:
@@ -226,5 +227,5 @@ def _show(value: Any) -> str:
     return "unset" if value is None else json.dumps(value)
 
 
-__all__ = ["OutputFolderError", "RunFolder", "atomic_output", "differences", "read_json", "read_json_lines",
+__all__ = ["OutputFolderError", "RunFolder", "atomic_output", "differences", "read_json", "read_json_lines", "read_npz",
            "write_atomic", "write_json_atomic"]

@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
-from .run_folder import RunFolder, read_json, read_json_lines, write_atomic, write_json_atomic
+from .run_folder import RunFolder, atomic_output, read_json, read_json_lines, write_atomic, write_json_atomic
 
 STAGES = ("unconstrained", "constrained")
 
@@ -345,9 +345,8 @@ class ResumeCheckpoint:
         os.makedirs(self.dir, exist_ok=True)
         step = int(model.num_timesteps)
         model_name, replay_name = f"model-{step}.zip", f"replay-{step}.npz"
-        tmp = os.path.join(self.dir, f".model-{step}.tmp.zip")
-        model.save(tmp)
-        os.replace(tmp, os.path.join(self.dir, model_name))
+        with atomic_output(os.path.join(self.dir, model_name)) as tmp:
+            model.save(tmp)
         if replay:
             model.replay_buffer.save_arrays(os.path.join(self.dir, replay_name))
         state = {"timesteps": step, "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
@@ -445,19 +444,14 @@ def check_run(cfg: TrainConfig) -> None:
         from .checkpoints import check_checkpoint
 
         check_checkpoint(cfg.init)
-    folder = output_folder(cfg)
-    folder.check(_settings(cfg), resume=cfg.resume, overwrite=cfg.overwrite, may_differ=RESUMABLE_SETTINGS,
-                 describe=_flag)
+    output_folder(cfg).check(dataclasses.asdict(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
+                             may_differ=RESUMABLE_SETTINGS, describe=_flag)
     if cfg.resume:
         point = ResumeCheckpoint(cfg.resolved_out_dir())
         if not point.exists():
             raise ValueError(f"nothing to resume in {cfg.resolved_out_dir()!r}: no resume point (resume/state.json, "
                              "written every replay_save_freq steps)")
         point.state()  # whole and readable
-
-
-def _settings(cfg: TrainConfig) -> Dict[str, Any]:
-    return dataclasses.asdict(cfg)
 
 
 def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[str, Any]:
@@ -476,7 +470,7 @@ def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[s
     out = cfg.resolved_out_dir()
     resume = ResumeCheckpoint(out)
     extra = {"command": command if command is not None else sys.argv, "versions": _versions()}
-    output_folder(cfg).prepare(_settings(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
+    output_folder(cfg).prepare(dataclasses.asdict(cfg), resume=cfg.resume, overwrite=cfg.overwrite,
                                may_differ=RESUMABLE_SETTINGS, describe=_flag, extra=extra)
     eval_log = os.path.join(out, "evaluations.jsonl")
 
@@ -503,9 +497,8 @@ def train_stage(cfg: TrainConfig, command: Optional[List[str]] = None) -> Dict[s
     else:
         final = evaluation.evaluate()
     model_path = os.path.join(out, "model.zip")
-    tmp = os.path.join(out, ".model.tmp.zip")
-    model.save(tmp)
-    os.replace(tmp, model_path)
+    with atomic_output(model_path) as tmp:
+        model.save(tmp)
     summary = {
         "env_id": cfg.env_id, "stage": cfg.stage, "seed": cfg.seed, "timesteps": int(model.num_timesteps),
         "gradient_steps": int(model._n_updates), "wall_s": round(train_wall, 1), "cpu_s": round(train_cpu, 1),

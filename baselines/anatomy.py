@@ -202,10 +202,15 @@ def parse_failures_field(text: Any) -> List[str]:
     return [part.rsplit(":", 1)[1] for part in text.split(";") if ":" in part]
 
 
+#: the run a failure record belongs to (the first fields of ``failures.csv``)
+RUN_KEYS = ("method", "agents", "difficulty", "problem")
+#: the fields of ``failures.csv``: the run, then :class:`AgentFailure`'s
+FAILURE_FIELDS = (*RUN_KEYS, *AgentFailure.__dataclass_fields__)
+
+
 def failure_records(row: Dict[str, Any], failures: Sequence[AgentFailure]) -> List[Dict[str, Any]]:
     """One flat record per failed agent, keyed by the run's cell (for ``failures.csv``)."""
-    keys = ("method", "agents", "difficulty", "problem")
-    return [{**{k: row[k] for k in keys}, **asdict(f)} for f in failures]
+    return [{**{k: row[k] for k in RUN_KEYS}, **asdict(f)} for f in failures]
 
 
 def failure_summary(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
@@ -299,6 +304,6 @@ def anatomy_figure(summary: Sequence[Dict[str, Any]], path: Any, title: str = ""
     return path
 
 
-__all__ = ["AgentFailure", "FailureTracker", "HELD_SHARE", "MOVING_SHARE", "REASONS", "WINDOW", "anatomy_figure",
-           "anatomy_table", "classify", "draw_anatomy", "failure_records", "failure_summary", "failures_field",
-           "parse_failures_field"]
+__all__ = ["AgentFailure", "FAILURE_FIELDS", "FailureTracker", "HELD_SHARE", "MOVING_SHARE", "REASONS", "RUN_KEYS",
+           "WINDOW", "anatomy_figure", "anatomy_table", "classify", "draw_anatomy", "failure_records",
+           "failure_summary", "failures_field", "parse_failures_field"]

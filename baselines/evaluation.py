@@ -99,7 +99,7 @@ class EvaluationSetup:
         :func:`~agents.search.sparsify.two_way_consistent`)."""
         import gymnasium as gym
 
-        import safe_mapf_envs
+        import safe_mapf_envs  # noqa: F401 (registers the ids)
         from agents import load_pretrained
 
         if models is None:
@@ -110,11 +110,7 @@ class EvaluationSetup:
         obs = np.asarray(env.unwrapped.observations_at(states))
         env.close()
         if "min_separation" not in kwargs:
-            # a quarter more than the multi-agent env's own spacing of starts (2.5 units on the
-            # 2D maps, 1.125 m on the apartments)
-            penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
-            kwargs["min_separation"] = 1.25 * penv.min_separation
-            penv.close()
+            kwargs["min_separation"] = default_min_separation(env_id)
         D, C = models["unconstrained"].pairwise(obs, obs, aggregate="max")
         D, C = np.asarray(D, np.float64), np.asarray(C, np.float64)
         if sparsify is not None:
@@ -185,6 +181,18 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
     return problems
 
 
+def default_min_separation(env_id: str) -> float:
+    """How far apart the starts (and the goals) of a problem are by default: a quarter more than
+    the multi-agent env's own spacing (2.5 units on the 2D maps, 1.125 m on the apartments)."""
+    import safe_mapf_envs
+
+    penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
+    try:
+        return 1.25 * float(penv.min_separation)
+    finally:
+        penv.close()
+
+
 def placeable_agents(env_id: str, n_agents: int, n_nodes: int = 1000, seed: int = 0,
                      min_separation: Optional[float] = None, attempts: int = 200) -> Tuple[int, float]:
     """How many agents' starts a placement like :func:`make_problems`' puts on the graph nodes
@@ -195,12 +203,10 @@ def placeable_agents(env_id: str, n_agents: int, n_nodes: int = 1000, seed: int 
     reach for them too. Returns ``(count, min_separation)``."""
     import gymnasium as gym
 
-    import safe_mapf_envs
+    import safe_mapf_envs  # noqa: F401 (registers the ids)
 
     if min_separation is None:
-        penv = safe_mapf_envs.parallel_env(env_id, n_agents=1)
-        min_separation = 1.25 * penv.min_separation
-        penv.close()
+        min_separation = default_min_separation(env_id)
     env = gym.make(env_id)
     pos = np.asarray(env.unwrapped.sample_states(n_nodes, np.random.default_rng(seed)))[:, :2]
     env.close()

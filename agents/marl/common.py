@@ -180,7 +180,9 @@ class RunFolder:
         if not meta.exists():
             raise ValueError(f"--resume: {out} has no resume point (checkpoint.json); start without --resume")
         state = read_json(meta, what="resume point")
-        if not isinstance(state, dict) or state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
+        if not isinstance(state, dict):
+            raise ValueError(f"--resume: {meta} is not a resume point's description (not a JSON object)")
+        if state.get("algo") != cfg.algo or state.get("env_id") != cfg.env_id:
             raise ValueError(f"--resume: {meta} describes a {state.get('algo')} run on {state.get('env_id')}, "
                              f"not {cfg.algo} on {cfg.env_id}")
         return state

@@ -13,8 +13,6 @@ from __future__ import annotations
 import functools
 import inspect
 import math
-import zipfile
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
@@ -103,20 +101,6 @@ def _check_matrix(m: np.ndarray, name: str, shape: Optional[Tuple[int, int]] = N
 
 
 # ---------------------------------------------------------------------- graph files
-def read_npz(path: Union[str, Path], what: str) -> Dict[str, np.ndarray]:
-    """Every array of the ``.npz`` file at ``path``, read whole (each member checked against its
-    checksum) without pickle; a missing, truncated or corrupt file raises ``ValueError`` naming
-    ``path`` (``what`` says what the file should be)."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: np.asarray(z[k]) for k in z.files}
-    except FileNotFoundError as exc:
-        raise ValueError(f"no {what} at {path}") from exc
-    except (OSError, KeyError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
-        raise ValueError(f"cannot read {path}: it is not a {what} (not an .npz file, or truncated or corrupt: "
-                         f"{type(exc).__name__}: {exc})") from exc
-
-
 def _node_space(space: Any) -> Any:
     """The space of one node observation in a model's observation space (its ``"observation"``)."""
     spaces_ = getattr(space, "spaces", None)
@@ -433,6 +417,8 @@ class WaypointGraph:
         record one), the shape of its node observations, and that they are finite and inside the
         space's bounds (see :func:`check_graph_nodes`).
         """
+        from ..run_folder import read_npz
+
         z = read_npz(path, "waypoint graph file")
         if "format" not in z or str(z["format"]) != "waypoint-graph-v1":
             raise ValueError(f"{path} is not a waypoint graph file (missing or wrong 'format')")
@@ -675,5 +661,4 @@ def build_problem_graph(
 
 
 __all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
-           "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges", "problem_edge_mask",
-           "read_npz"]
+           "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges", "problem_edge_mask"]

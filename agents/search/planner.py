@@ -434,8 +434,12 @@ class BufferPlanner:
         """The graph a problem is searched on: buffer nodes plus the agents' start and goal
         observations, pruned with this planner's cut-offs (see
         :func:`~agents.search.graph.build_problem_graph`; edges that pass a place of ``avoid`` go
-        within the proximity radius)."""
+        within the proximity radius). Two agents with the same goal are refused (``ValueError``)."""
         starts, goals = check_endpoints(self.observations, starts, goals)
+        same = _same_rows(goals)
+        if same is not None:
+            raise ValueError(f"agents {same[0]} and {same[1]} have the same goal: no plan brings both there (every "
+                             "agent needs a place of its own)")
         key = (starts.shape, starts.tobytes(), goals.tobytes())
         if self._attached is None or self._attached[0] != key:
             self._attached = (key, attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
@@ -495,10 +499,6 @@ class BufferPlanner:
         reach its goal from.
         """
         t0 = time.perf_counter()
-        same = _same_rows(check_endpoints(self.observations, starts, goals)[1])
-        if same is not None:
-            raise ValueError(f"agents {same[0]} and {same[1]} have the same goal: no plan brings both there (every "
-                             "agent needs a place of its own)")
         problem = self.problem_graph(starts, goals, exclude, exclude_edges, avoid, detached, goal_detached)
         k = problem.n_agents
         s_ids, g_ids = problem.start_ids, problem.goal_ids
@@ -570,11 +570,6 @@ class BufferPlanner:
         an expansion scans proportionally more edges."""
         density = float(durations.data.sum()) / max(1, durations.shape[0])
         return 1.0 if density <= REFERENCE_EDGE_STEPS else REFERENCE_EDGE_STEPS / density
-
-    def cbs_expansion_limit(self, durations: sparse.csr_matrix) -> Optional[int]:
-        """The expansion budget of one CBS / ECBS call on a problem graph with these edge durations:
-        ``expansion_limit`` times :meth:`work_scale`."""
-        return _scaled(self.expansion_limit, self.work_scale(durations))
 
     def _repair(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
         """The large-neighbourhood repair with this planner's budget (times ``scale``) and seed."""

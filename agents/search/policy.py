@@ -35,9 +35,10 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..run_folder import read_npz
 from .controller import AgentPlan, WaypointController
 from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
-from .graph import NodePairwise, ProblemGraph, check_graph_nodes, env_record, read_npz
+from .graph import NodePairwise, ProblemGraph, check_graph_nodes, env_record
 from .models import (
     buffer_observations,
     check_models,

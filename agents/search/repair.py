@@ -135,7 +135,7 @@ class EdgeMemory:
     def load(cls, path: Union[str, Path]) -> "EdgeMemory":
         """Read a memory written by :meth:`save`, whole and without pickle; a missing, truncated,
         corrupt or malformed file raises ``ValueError`` naming ``path``."""
-        from .graph import read_npz
+        from ..run_folder import read_npz
 
         arrays = read_npz(path, "saved edge memory")
         try:

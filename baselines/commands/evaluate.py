@@ -194,7 +194,7 @@ def _open_rows(args: argparse.Namespace, out, failure_file: bool = True):
     both start empty."""
     import shlex
 
-    from baselines.anatomy import AgentFailure
+    from baselines.anatomy import FAILURE_FIELDS, RUN_KEYS
     from baselines.cli import resume_command
     from baselines.output import RowWriter, parse_row, read_kept_rows, write_rows_atomic
 
@@ -202,19 +202,18 @@ def _open_rows(args: argparse.Namespace, out, failure_file: bool = True):
                           may_differ=NOT_ROW_SETTINGS, describe=_flag,
                           extra={"command": shlex.join(["safe-mapf", *getattr(args, "argv", [])])})
     kept = read_kept_rows(out / "runs.csv") if args.resume else []
-    fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
-    keys = {(r["method"], r["agents"], r["difficulty"], r["problem"]) for r in kept}
+    keys = {tuple(r[k] for k in RUN_KEYS) for r in kept}
     failures = [r for r in (read_kept_rows(out / "failures.csv") if args.resume else [])
-                if (r.get("method"), r.get("agents"), r.get("difficulty"), r.get("problem")) in keys]
+                if tuple(r.get(k) for k in RUN_KEYS) in keys]
     if args.resume:  # without a line an interruption cut off
         write_rows_atomic(kept, out / "runs.csv", fields=list(kept[0]) if kept else None)
     if failure_file:
-        write_rows_atomic(failures, out / "failures.csv", fields=fields)
+        write_rows_atomic(failures, out / "failures.csv", fields=FAILURE_FIELDS)
     writer = RowWriter(out / "runs.csv", append=True)
     args.interrupt_note = lambda: (
         f"kept {len(kept) + writer.count} runs in {out / 'runs.csv'}; continue with: "
         + resume_command(getattr(args, "argv", [])))
-    failure_writer = RowWriter(out / "failures.csv", fields, append=True) if failure_file else None
+    failure_writer = RowWriter(out / "failures.csv", FAILURE_FIELDS, append=True) if failure_file else None
     return [parse_row(r) for r in kept], writer, failures, failure_writer
 
 
@@ -498,12 +497,11 @@ def write_anatomy(rows, failures, out, title: str = "") -> str:
     that did not arrive), ``anatomy.csv`` / ``anatomy.md`` (reasons per cell) and ``anatomy.png``
     (stacked bars); returns the Markdown table."""
     from agents.run_folder import atomic_output, write_atomic
-    from baselines.anatomy import AgentFailure, anatomy_figure, anatomy_table, failure_summary
+    from baselines.anatomy import FAILURE_FIELDS, anatomy_figure, anatomy_table, failure_summary
     from baselines.evaluation import write_csv
     from baselines.output import write_rows_atomic
 
-    fields = ["method", "agents", "difficulty", "problem", *AgentFailure.__dataclass_fields__]
-    write_rows_atomic(failures, out / "failures.csv", fields=fields)  # a header alone: every agent arrived
+    write_rows_atomic(failures, out / "failures.csv", fields=FAILURE_FIELDS)  # a header alone: every agent arrived
     summary = failure_summary(rows)
     write_csv(summary, out / "anatomy.csv")
     table = anatomy_table(summary)

@@ -147,15 +147,14 @@ def run(args: argparse.Namespace) -> int:
     --eval-max-distance, mean episode cost, Spearman correlation of predicted distances).
     With --seeds, one such run per seed (in parallel on Ray with --ray) and a combined summary.
     """
-    from agents.training import check_run, train_stage
+    from agents.training import train_stage
 
     cfg = config_from_args(args)
     command = ["safe-mapf", *getattr(args, "argv", sys.argv[1:])]
     args.interrupt_note = lambda: _interrupt_note(args, cfg)
     if args.seeds is not None or args.ray is not None:
         return _run_seeds(args, cfg, command)
-    check_run(cfg)
-    summary = train_stage(cfg, command=command)
+    summary = train_stage(cfg, command=command)  # its checks come first
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

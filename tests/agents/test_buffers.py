@@ -153,5 +153,5 @@ def test_buffer_arrays_round_trip_and_shared_achieved_goal(tmp_path):
     with pytest.raises(ValueError, match="holds a buffer of 50"):
         small.load_arrays(path)
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="not a readable replay-buffer file"):
+    with pytest.raises(ValueError, match="bad.npz: it is not a replay-buffer file"):
         other.load_arrays(str(tmp_path / "bad.npz"))

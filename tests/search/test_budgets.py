@@ -109,6 +109,10 @@ def test_no_clock_decides_a_plan_of_the_planner(monkeypatch):
 
     sparse_graph = sparse.csr_matrix(np.ones((10, 10)) * 3.0)  # 30 edge-steps per node
     dense = sparse.csr_matrix(np.ones((10, 10)) * (6.0 * REFERENCE_EDGE_STEPS / 10))  # 6 x the reference
-    assert planner.cbs_expansion_limit(sparse_graph) == planner.expansion_limit
-    assert planner.cbs_expansion_limit(dense) == planner.expansion_limit // 6
     assert planner.work_scale(sparse_graph) == 1.0 and planner.work_scale(dense) == 1 / 6
+    monkeypatch.undo()
+    import agents.search.planner as planner_module
+
+    monkeypatch.setattr(planner_module, "REFERENCE_EDGE_STEPS", 1e-9)  # every graph is "dense": budgets shrink
+    scaled = tight.plan(starts, goals)
+    assert scaled.status == "timeout" and "expansion limit of 1 low-level" in scaled.message
