@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 import numpy as np
 from scipy import sparse
 
+from ..run_folder import read_npz
 from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, long_legs, relax_cost_locally
 from .sparsify import cap_out_edges
 
@@ -417,8 +418,6 @@ class WaypointGraph:
         record one), the shape of its node observations, and that they are finite and inside the
         space's bounds (see :func:`check_graph_nodes`).
         """
-        from ..run_folder import read_npz
-
         z = read_npz(path, "waypoint graph file")
         if "format" not in z or str(z["format"]) != "waypoint-graph-v1":
             raise ValueError(f"{path} is not a waypoint graph file (missing or wrong 'format')")

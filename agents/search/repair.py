@@ -19,6 +19,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..run_folder import read_npz
+
 Edge = Tuple[int, int]
 
 
@@ -135,8 +137,6 @@ class EdgeMemory:
     def load(cls, path: Union[str, Path]) -> "EdgeMemory":
         """Read a memory written by :meth:`save`, whole and without pickle; a missing, truncated,
         corrupt or malformed file raises ``ValueError`` naming ``path``."""
-        from ..run_folder import read_npz
-
         arrays = read_npz(path, "saved edge memory")
         try:
             return cls.from_arrays(arrays)
