@@ -34,6 +34,8 @@ class TrainConfig:
 
     env_id: str = "SafeCentralObstacle-v0"
     """a registered goal-conditioned environment id"""
+    map_file: Optional[str] = None
+    """the map file ``env_id`` was registered from (``safe-mapf train --map``), recorded with the run"""
     stage: str = "unconstrained"
     """'unconstrained' (from scratch) or 'constrained' (Lagrangian fine-tuning of ``init``)"""
     timesteps: int = 30_000

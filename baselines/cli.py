@@ -34,6 +34,25 @@ def show_progress(disabled: bool = False) -> bool:
     return not disabled and sys.stderr.isatty()
 
 
+def add_map_argument(parser: argparse.ArgumentParser, env_option: str = "--env") -> None:
+    """``--map FILE``: a map of one's own in place of the env's layout (see :func:`env_for_map`)."""
+    parser.add_argument("--map", dest="map_file", default=None, metavar="FILE",
+                        help="a map of your own (MovingAI .map, occupancy image, .npy boolean array; one cell per "
+                             "character or pixel, 3 world units per cell) in place of the map of " + env_option
+                             + ", which gives the other settings; the env id becomes Safe<file stem>-v0")
+
+
+def env_for_map(env_id: str, map_file: str | None) -> str:
+    """``env_id``, or where ``map_file`` is given the id of that map registered with ``env_id``'s
+    settings (:func:`safe_mapf_envs.register_map`); a bad file raises ``ValueError`` naming it."""
+    if not map_file:
+        return env_id
+    import safe_mapf_envs
+    from safe_mapf_envs.maps import GridMap
+
+    return safe_mapf_envs.register_map(GridMap.from_file(map_file), base=env_id)
+
+
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "baselines.commands.envs",

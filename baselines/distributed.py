@@ -90,7 +90,9 @@ def setup_payload(setup: Any) -> Dict[str, Any]:
     class and its ``__init__`` fields, the models as the bytes of their zips."""
     fields = {f.name: getattr(setup, f.name) for f in dataclasses.fields(setup) if f.init}
     fields["models"] = {k: _pack_model(m) for k, m in fields["models"].items()}
-    return dict(cls=type(setup), fields=fields)
+    from safe_mapf_envs.registration import map_specs
+
+    return dict(cls=type(setup), fields=fields, map_specs=map_specs())
 
 
 class EvaluationWorker:
@@ -101,7 +103,11 @@ class EvaluationWorker:
                  env_kwargs: Optional[Dict[str, Any]] = None) -> None:
         import torch
 
+        from safe_mapf_envs.registration import register_spec
+
         torch.set_num_threads(threads)
+        for spec in payload.get("map_specs", ()):  # maps of one's own the driver registered
+            register_spec(spec)
         fields = dict(payload["fields"])
         fields["models"] = {k: _unpack_model(v) for k, v in fields["models"].items()}
         self.setup = payload["cls"](**fields)

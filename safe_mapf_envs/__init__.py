@@ -23,6 +23,10 @@ Importing the package registers the Gymnasium ids listed in
     # 64 episodes stepped in one batch (the same episodes as vectorization_mode="sync")
     vec = gym.make_vec("SafeCentralObstacle-v0", num_envs=64, vectorization_mode="vector_entry_point")
 
+    # a map of one's own (MovingAI .map, occupancy image or .npy array) under an id of its own
+    room = safe_mapf_envs.GridMap.from_file("room-32-32-4.map")
+    env_id = safe_mapf_envs.register_map(room)  # "SafeRoom-32-32-4-v0"
+
 This package imports no torch and nothing from ``agents`` or ``baselines``.
 """
 from importlib import metadata as _metadata
@@ -33,7 +37,7 @@ from .factories import env, parallel_env, raw_env
 from .formats import OBSERVATION_FORMATS, flat_space, flatten_observation
 from .maps import APARTMENTS, MAPS, Apartment, GridMap, get_map
 from .multi_agent import SafeMultiNavigationEnv
-from .registration import ENV_SPECS, EnvSpec, env_spec, register_envs
+from .registration import ENV_SPECS, EnvSpec, env_spec, map_specs, register_envs, register_map
 from .scenario import NavigationScenario
 from .sensors import PanoramaSensor, Scene, render_panoramas, scene_for_layout
 from .single_agent import SafeNavigationEnv
@@ -74,10 +78,12 @@ __all__ = [
     "flat_space",
     "flatten_observation",
     "get_map",
+    "map_specs",
     "multi",
     "parallel_env",
     "raw_env",
     "register_envs",
+    "register_map",
     "render_panoramas",
     "scene_for_layout",
 ]

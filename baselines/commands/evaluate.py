@@ -10,6 +10,7 @@ import time
 
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.search.mapf import SPREAD_MODES
+    from baselines.cli import add_map_argument
     from baselines.evaluation import DIFFICULTIES
     from baselines.methods import DEFAULT_METHODS, MARL_METHODS, METHODS, PAPER_METHODS
     from baselines.output import add_resume_arguments
@@ -17,6 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="compare the methods on the same problems (Tables I and II, Figure 1)",
                        description=run.__doc__)
     p.add_argument("--env", default="SafeCentralObstacle-v0", help="env id with shipped checkpoints")
+    add_map_argument(p)
     p.add_argument("--unconstrained", default=None, metavar="PATH",
                    help="unconstrained checkpoint (default: the shipped one for --env)")
     p.add_argument("--constrained", default=None, metavar="PATH",
@@ -289,7 +291,7 @@ def run(args: argparse.Namespace) -> int:
 
     from agents.run_folder import atomic_output, write_atomic
     from baselines.anatomy import failure_records
-    from baselines.cli import show_progress
+    from baselines.cli import env_for_map, show_progress
     from baselines.evaluation import (
         REPAIR_SEED_OFFSET,
         VALIDATION_SEED_OFFSET,
@@ -303,6 +305,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from baselines.methods import DEFAULT_METHODS, get_methods
 
+    args.env = env_for_map(args.env, args.map_file)  # a map of one's own: its id, registered
     repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
     if args.repair_problems and repair_seed == args.seed:
         raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "

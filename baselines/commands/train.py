@@ -4,11 +4,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Sequence
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     from agents.training import TrainConfig
+    from baselines.cli import add_map_argument
     from baselines.output import add_resume_arguments
 
     d = TrainConfig()
@@ -19,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                "safe-mapf train --env SafeCentralObstacle-v0 --stage constrained --init runs/u/model.zip --out runs/c",
     )
     p.add_argument("--env", dest="env_id", default=d.env_id, help="registered environment id")
+    add_map_argument(p)
     p.add_argument("--stage", choices=["unconstrained", "constrained"], default=d.stage,
                    help="train from scratch, or fine-tune --init with the Lagrange multiplier")
     p.add_argument("--timesteps", type=int, default=d.timesteps, help="environment steps of this stage")
@@ -128,10 +130,11 @@ def config_from_args(args: argparse.Namespace):
     import dataclasses
 
     from agents.training import TrainConfig
-    from baselines.cli import show_progress
+    from baselines.cli import env_for_map, show_progress
 
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     kwargs = {k: v for k, v in vars(args).items() if k in names}
+    kwargs["env_id"] = env_for_map(args.env_id, getattr(args, "map_file", None))
     for k in ("target_distance", "target_cost", "oracle_band"):
         if kwargs.get(k) is not None:
             kwargs[k] = tuple(kwargs[k])
@@ -186,9 +189,14 @@ def _line(summary: Dict[str, Any], seed: bool = False) -> str:
             f"lambda={summary['lagrange_multiplier']:.3f}; saved {summary['model']}")
 
 
-def _train_one(cfg: Any, command: Optional[List[str]]) -> Dict[str, Any]:
+def _train_one(cfg: Any, command: Optional[List[str]], map_specs: Sequence[Any] = ()) -> Dict[str, Any]:
+    """One seed's run; ``map_specs``: the ids of maps of one's own to register first (a Ray worker
+    does not know the ones the command registered)."""
     from agents.training import train_stage
+    from safe_mapf_envs.registration import register_spec
 
+    for spec in map_specs:
+        register_spec(spec)
     return train_stage(cfg, command=command)
 
 
@@ -221,7 +229,9 @@ def _run_seeds(args: argparse.Namespace, cfg: Any, command: Optional[List[str]])
         ray = init_ray(args.ray)
         task = ray.remote(num_cpus=1)(_train_one)
         quiet = [dataclasses.replace(c, progress_bar=False) for c in cfgs]
-        refs = [task.remote(c, command) for c in quiet]
+        from safe_mapf_envs.registration import map_specs
+
+        refs = [task.remote(c, command, map_specs()) for c in quiet]
         summaries = []
         pending = list(refs)
         while pending:  # report each run as it ends

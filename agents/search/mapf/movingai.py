@@ -21,9 +21,8 @@ from typing import List, Optional, Sequence, Tuple, Union
 import numpy as np
 from scipy import sparse
 
-FREE_CHARS = frozenset(".GS")
-#: terrain an agent may not enter (out of bounds, trees, water)
-BLOCKED_CHARS = frozenset("@OTW")
+from safe_mapf_envs.maps.files import BLOCKED_CHARS, FREE_CHARS, MovingAIFormatError, read_movingai, read_text_lines
+
 Cell = Tuple[int, int]
 PathLike = Union[str, Path]
 
@@ -59,68 +58,11 @@ class ScenAgent:
     line: int = field(default=0, compare=False)
 
 
-class MovingAIFormatError(ValueError):
-    """A ``.map`` or ``.scen`` file that does not follow the MovingAI format; the message names
-    the file and, where one is to blame, the line (``path:line: ...``)."""
-
-
-def _read_lines(path: Path) -> List[str]:
-    """The file's lines; :class:`MovingAIFormatError` naming the file when it is not UTF-8 text."""
-    data = path.read_bytes()
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise MovingAIFormatError(f"{path}: not a text file (the byte at offset {exc.start} is not UTF-8)") from None
-    if "\0" in text:
-        raise MovingAIFormatError(f"{path}: not a text file (it holds NUL bytes)")
-    return text.splitlines()
-
-
 def load_map(path: PathLike) -> GridMap:
-    """Read a MovingAI ``.map`` file.
-
-    The header (``type``, ``height``, ``width``) ends with a line ``map``; then come exactly
-    ``height`` rows of ``width`` characters from ``.GS`` (free) and ``@OTW`` (blocked). Trailing
-    whitespace of a row and blank lines after the grid are ignored; anything else that breaks
-    these rules raises :class:`MovingAIFormatError` naming the file and line.
-    """
+    """Read a MovingAI ``.map`` file (:func:`safe_mapf_envs.maps.files.read_movingai`: anything
+    that breaks the format raises :class:`MovingAIFormatError` naming the file and line)."""
     path = Path(path)
-    lines = _read_lines(path)
-    header = {}
-    i = 0
-    while i < len(lines) and lines[i].strip().lower() != "map":
-        parts = lines[i].split()
-        if len(parts) == 2:
-            header[parts[0].lower()] = parts[1]
-        i += 1
-    if i == len(lines):
-        raise MovingAIFormatError(f"{path}: no 'map' line in the header")
-    try:
-        h, w = int(header["height"]), int(header["width"])
-    except (KeyError, ValueError):
-        raise MovingAIFormatError(f"{path}: header needs integer 'height' and 'width'") from None
-    if h < 1 or w < 1:
-        raise MovingAIFormatError(f"{path}: the header gives a {h} x {w} map (height x width); "
-                                  "both must be at least 1")
-    first = i + 1  # index of the grid's first row in ``lines``
-    rows = [r.rstrip() for r in lines[first:first + h]]
-    if len(rows) < h:
-        raise MovingAIFormatError(f"{path}: the header gives height {h}, the grid has {len(rows)} rows")
-    extra = next((j for j in range(first + h, len(lines)) if lines[j].strip()), None)
-    if extra is not None:
-        raise MovingAIFormatError(f"{path}:{extra + 1}: the header gives height {h}, the grid goes on past it")
-    known = FREE_CHARS | BLOCKED_CHARS
-    for j, r in enumerate(rows):
-        ln = first + j + 1
-        if len(r) != w:
-            raise MovingAIFormatError(f"{path}:{ln}: row of {len(r)} characters, the header gives width {w}")
-        bad = next((ch for ch in r if ch not in known), None)
-        if bad is not None:
-            raise MovingAIFormatError(f"{path}:{ln}: unknown map character {bad!r} in column {r.index(bad) + 1} "
-                                      f"(free: {''.join(sorted(FREE_CHARS))}; "
-                                      f"blocked: {''.join(sorted(BLOCKED_CHARS))})")
-    free = np.array([[ch in FREE_CHARS for ch in r] for r in rows], dtype=bool)
-    return GridMap(free, path.stem)
+    return GridMap(~read_movingai(path), path.stem)
 
 
 def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
@@ -133,7 +75,7 @@ def load_scen(path: PathLike, k: Optional[int] = None) -> List[ScenAgent]:
     """
     path = Path(path)
     out: List[ScenAgent] = []
-    for ln, line in enumerate(_read_lines(path)):
+    for ln, line in enumerate(read_text_lines(path, MovingAIFormatError)):
         if not line.strip() or line.lower().startswith("version"):
             continue
         parts = line.split("\t") if "\t" in line else line.split()
@@ -260,3 +202,7 @@ def load_instance(map_path: PathLike, scen_path: PathLike, k: Optional[int] = No
     inst.starts = [inst.node(a.start) for a in agents]
     inst.goals = [inst.node(a.goal) for a in agents]
     return inst
+
+
+__all__ = ["BLOCKED_CHARS", "FREE_CHARS", "GridInstance", "GridMap", "MovingAIFormatError", "ScenAgent",
+           "check_scen_matches_map", "grid_graph", "load_instance", "load_map", "load_scen"]
