@@ -38,6 +38,10 @@ from .formats import flat_space, flatten_agents
 from .world import World
 
 _RESET_OPTIONS = ("starts", "goals", "goal_distance")
+#: agents up to which the nearest neighbours are found against every agent (a k-d tree beyond)
+_DENSE_NEIGHBORS = 128
+_NEIGHBOR_SLACK = 4  # candidates the k-d tree proposes on top of the needed ones
+_ROWS_AT_ONCE = 100  # live agents from which per-agent views are made by list() (faster for many)
 
 
 def _snake(name: str) -> str:
@@ -394,15 +398,20 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
             buf[:, 1] = buf[:, 0]
             buf[:, 2] = self._goals_norm[idx]
         names = [self.possible_agents[i] for i in idx.tolist()]
+        # each agent's entries are views of its row of buf (list() makes many at C speed)
+        if n > _ROWS_AT_ONCE:
+            own, achieved, goal = list(buf[:, 0]), list(buf[:, 1]), list(buf[:, 2])
+        else:
+            own, achieved, goal = [b[0] for b in buf], [b[1] for b in buf], [b[2] for b in buf]
         if not self.observe_neighbors:
             return {
-                name: {"observation": b[0], "achieved_goal": b[1], "desired_goal": b[2]}
-                for name, b in zip(names, buf)
+                name: {"observation": o, "achieved_goal": a, "desired_goal": g}
+                for name, o, a, g in zip(names, own, achieved, goal)
             }
         nb = self._neighbors(idx, pos)
         return {
-            name: {"observation": b[0], "achieved_goal": b[1], "desired_goal": b[2], "neighbors": k}
-            for name, b, k in zip(names, buf, nb)
+            name: {"observation": o, "achieved_goal": a, "desired_goal": g, "neighbors": k}
+            for name, o, a, g, k in zip(names, own, achieved, goal, nb)
         }
 
     def _formatted(self, idx: np.ndarray) -> Dict[str, Any]:
@@ -411,18 +420,46 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         return flatten_agents(obs) if self.observation_format == "flat" else obs
 
     def _neighbors(self, idx: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Normalised offsets to the ``observe_neighbors`` nearest other agents, ``(len(idx), k, 2)``."""
+        """Normalised offsets to the ``observe_neighbors`` nearest other agents, ``(len(idx), k, 2)``.
+
+        Nearest first, ties in agent order. With many agents a k-d tree proposes a few more
+        candidates than needed per agent and the exact distances order them; an agent whose
+        candidates may miss a tie at the edge (agents passing through each other can share a
+        place) is measured against every agent, as small crowds always are.
+        """
         k = self.observe_neighbors
-        m = min(k, self.n_agents - 1)
+        n_all = self.n_agents
+        m = min(k, n_all - 1)
         out = np.zeros((len(idx), k, 2), dtype=np.float32)
-        if m == 0:
+        if m == 0 or len(idx) == 0:
             return out
+        q = m + 1 + _NEIGHBOR_SLACK  # oneself, the m nearest and a few more
+        if n_all <= max(_DENSE_NEIGHBORS, q):
+            out[:, :m] = self._nearest_dense(idx, pos, m)
+            return out
+        from scipy.spatial import cKDTree  # here: importing the package stays light
+
+        kd_dist, cand = cKDTree(self._pos).query(pos, k=q)
+        rel = self._pos[cand] - pos[:, None]  # (n, q, 2), world units, as the dense computation has them
+        d2 = (rel * rel).sum(-1)
+        d2[cand == idx[:, None]] = np.inf  # not oneself
+        order = np.lexsort((cand, d2), axis=-1)[:, :m]  # by distance, then agent index (a stable argsort)
+        nearest_d2 = np.take_along_axis(d2, order[:, -1:], axis=1)[:, 0]
+        # every agent the tree left out is at least its q-th distance away (up to rounding)
+        safe = np.sqrt(nearest_d2) < kd_dist[:, -1] * (1.0 - 1e-9)
+        out[:, :m] = np.take_along_axis(rel, order[..., None], axis=1) * self._inv_size
+        if not safe.all():
+            bad = np.flatnonzero(~safe)
+            out[bad, :m] = self._nearest_dense(idx[bad], pos[bad], m)
+        return out
+
+    def _nearest_dense(self, idx: np.ndarray, pos: np.ndarray, m: int) -> np.ndarray:
+        """Normalised offsets to the ``m`` nearest other agents against every agent, ``(len(idx), m, 2)``."""
         rel = self._pos[None] - pos[:, None]  # (n, N, 2), world units
         d2 = (rel * rel).sum(-1)
         d2[np.arange(len(idx)), idx] = np.inf  # not oneself
         order = np.argsort(d2, axis=1, kind="stable")[:, :m]
-        out[:, :m] = np.take_along_axis(rel, order[..., None], axis=1) * self._inv_size
-        return out
+        return np.take_along_axis(rel, order[..., None], axis=1) * self._inv_size
 
     def _infos(self, idx: np.ndarray, obstacle_cost: np.ndarray, dist: np.ndarray, counts: np.ndarray,
                partners: Dict[int, List[int]]) -> Dict[str, Dict[str, Any]]:
@@ -431,18 +468,24 @@ class SafeMultiNavigationEnv(NavigationEnvBase, ParallelEnv):
         cnt = counts[idx]
         cost = obstacle_cost + self.collision_cost * cnt if self.collision_cost else obstacle_cost
         names, thr = self.possible_agents, self.goal_threshold
+        live = idx.tolist()
+        if len(live) > _ROWS_AT_ONCE:  # rows of the copies, as views made at C speed
+            at, to = list(pos[idx]), list(goals[idx])
+        else:
+            at, to = [pos[i] for i in live], [goals[i] for i in live]
+        rows = zip(live, at, to, cost.tolist(), obstacle_cost.tolist(), dist.tolist(), cnt.tolist())
         return {
             names[i]: {
                 "cost": c,
                 "obstacle_cost": oc,
-                "position": pos[i],
-                "goal": goals[i],
+                "position": p,
+                "goal": g,
                 "distance_to_goal": d,
                 "is_success": d <= thr,
                 "collisions": k,
                 "collided_with": [names[j] for j in partners[i]] if k else [],
             }
-            for i, c, oc, d, k in zip(idx.tolist(), cost.tolist(), obstacle_cost.tolist(), dist.tolist(), cnt.tolist())
+            for i, p, g, c, oc, d, k in rows
         }
 
     # ----------------------------------------------------------------- PettingZoo API

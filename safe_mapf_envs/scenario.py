@@ -91,6 +91,7 @@ class NavigationScenario:
             geodesic_resolution = getattr(self.layout, "resize_factor", 1.0) / 5.0
         self._geodesic_resolution = float(geodesic_resolution)
         self._oracle: Optional[GeodesicOracle] = None
+        self._areas: Dict[float, float] = {}  # area_around_free by reach (placement asks at every reset)
 
     @property
     def oracle(self) -> GeodesicOracle:
@@ -239,7 +240,9 @@ class NavigationScenario:
         """Sample a free goal whose ground-truth geodesic distance from ``start`` lies in ``band``."""
         lo, hi = check_band(band)
         oracle = self.oracle
-        cells, _ = oracle.band_cells(start, lo, hi)
+        start_cell = int(oracle.cell_of(start))
+        row = self._graph_distances_within(start_cell, hi)
+        cells = np.flatnonzero((row >= lo) & (row <= hi))
         if len(cells) == 0:
             raise ValueError(f"no free goal at geodesic distance in [{lo:g}, {hi:g}] from start {show_point(start)}")
         centres = oracle.centres.reshape(-1, 2)
@@ -248,11 +251,40 @@ class NavigationScenario:
             cell = cells[rng.integers(len(cells))]
             goal = centres[cell] + rng.uniform(-0.5, 0.5, size=2) * res
             if self.is_free(goal):
-                d = float(oracle.distance(start, goal))
+                d = self._geodesic_within(row, start, start_cell, goal)
                 if lo <= d <= hi:
                     return goal
         # the cell centres themselves are free; fall back to one of them
         return centres[cells[rng.integers(len(cells))]].copy()
+
+    def _graph_distances_within(self, cell: int, limit: float) -> np.ndarray:
+        """The oracle's graph distances from raster cell ``cell`` (:meth:`GeodesicOracle.distances_from_cell
+        <safe_mapf_envs.geodesic.GeodesicOracle.distances_from_cell>`) up to ``limit``, ``inf`` beyond.
+
+        Dijkstra's search stops at ``limit``: every distance up to it is the full search's
+        (each is the sum along the same shortest path), at a fraction of the cost for a goal band
+        much shorter than the map.
+        """
+        from scipy.sparse.csgraph import dijkstra
+
+        return dijkstra(self.oracle._graph, directed=True, indices=cell, limit=limit)
+
+    def _geodesic_within(self, row: np.ndarray, start: np.ndarray, start_cell: int, goal: np.ndarray) -> float:
+        """:meth:`GeodesicOracle.distance <safe_mapf_envs.geodesic.GeodesicOracle.distance>` from
+        ``start`` to one ``goal`` with the row of :meth:`_graph_distances_within` (the same arithmetic).
+
+        Where the row stops short of the goal's cell the result is ``inf`` instead of a finite
+        distance beyond the row's limit, unless the goal is in sight (then both are the
+        straight-line length): either way beyond the limit.
+        """
+        oracle = self.oracle
+        a = np.asarray(start, dtype=np.float64).reshape(2)
+        flat = np.asarray(goal, dtype=np.float64).reshape(-1, 2)
+        cells = oracle.cell_of(flat)
+        centres = oracle.centres.reshape(-1, 2)
+        d = row[cells] + np.linalg.norm(flat - centres[cells], axis=-1) + np.linalg.norm(a - centres[start_cell])
+        vis = oracle.visible(a[None], flat)
+        return float(np.where(vis, np.linalg.norm(flat - a, axis=-1), d)[0])
 
     def geodesic_distance(self, a, b) -> np.ndarray:
         """Ground-truth shortest collision-free path length from ``a`` to ``b`` (``b`` may be ``(..., 2)``).
@@ -297,6 +329,13 @@ class NavigationScenario:
 
     def area_around_free(self, reach: float) -> float:
         """An upper bound on the area within ``reach`` (>= agent radius) of the free positions."""
+        key = float(reach)
+        area = self._areas.get(key)
+        if area is None:
+            area = self._areas[key] = self._area_around_free(key)
+        return area
+
+    def _area_around_free(self, reach: float) -> float:
         e = float(reach) - self.agent_radius
         w, h = self.size
         shrunk = self.field.boxes + np.array([e, e, -e, -e])
@@ -364,10 +403,18 @@ class NavigationScenario:
         r = self.agent_radius
         w, h = self.size
         free = ~(((ys < r) | (ys > h - r))[:, None] | ((xs < r) | (xs > w - r))[None, :])
+        # A box blocks only the points within r of it: the window of the grid that it reaches,
+        # a little more (against rounding); beyond it one gap alone exceeds r.
+        pad = r * (1.0 + 1e-6) + 1e-9
         for x0, y0, x1, y1 in self.field.boxes.tolist():
-            gx = np.maximum(np.maximum(x0 - xs, xs - x1), 0.0)
-            gy = np.maximum(np.maximum(y0 - ys, ys - y1), 0.0)
-            free &= np.sqrt(gy[:, None] * gy[:, None] + gx[None, :] * gx[None, :]) >= r
+            j0, j1 = np.searchsorted(xs, x0 - pad, "left"), np.searchsorted(xs, x1 + pad, "right")
+            i0, i1 = np.searchsorted(ys, y0 - pad, "left"), np.searchsorted(ys, y1 + pad, "right")
+            if j0 >= j1 or i0 >= i1:
+                continue
+            bx, by = xs[j0:j1], ys[i0:i1]
+            gx = np.maximum(np.maximum(x0 - bx, bx - x1), 0.0)
+            gy = np.maximum(np.maximum(y0 - by, by - y1), 0.0)
+            free[i0:i1, j0:j1] &= np.sqrt(gy[:, None] * gy[:, None] + gx[None, :] * gx[None, :]) >= r
         return free
 
     def check_agent_count(self, n: int, min_separation: float, max_start_cost: Optional[float] = None) -> int:
@@ -541,16 +588,42 @@ class NavigationScenario:
             self.check_position(p[i], f"{what} of agent_{i}")  # raises with the precise reason
         if overlap_ok:  # agents pass through each other: overlapping is fine
             return p
-        diff = p[:, None] - p[None]
-        dist = np.sqrt((diff * diff).sum(-1))
-        close = np.triu(dist < 2.0 * self.agent_radius, k=1)
-        if close.any():
-            i, j = (int(k) for k in np.argwhere(close)[0])
+        close = self._first_overlap(p)
+        if close is not None:
+            i, j, dist = close
             raise ValueError(
-                f"{what}s of agent_{i} and agent_{j} are {dist[i, j]:.4g} apart, closer than "
+                f"{what}s of agent_{i} and agent_{j} are {dist:.4g} apart, closer than "
                 f"2 * agent_radius = {2.0 * self.agent_radius:g}: the agents would overlap"
             )
         return p
+
+    def _first_overlap(self, p: np.ndarray) -> Optional[Tuple[int, int, float]]:
+        """The first pair ``(i, j, distance)``, ``i < j`` in row-major order, of positions ``p``
+        ``(n, 2)`` closer than ``2 * agent_radius``, or ``None``. Many positions are measured only
+        in the pairs a k-d tree finds near each other (a little farther included, against
+        rounding), with the same arithmetic as all pairs of a few."""
+        from scipy.spatial import cKDTree
+
+        limit = 2.0 * self.agent_radius
+        if len(p) <= 256:
+            diff = p[:, None] - p[None]
+            dist = np.sqrt((diff * diff).sum(-1))
+            close = np.argwhere(np.triu(dist < limit, k=1))
+            if not len(close):
+                return None
+            i, j = (int(k) for k in close[0])
+            return i, j, float(dist[i, j])
+        pairs = cKDTree(p).query_pairs(limit * (1.0 + 1e-9) + 1e-12, output_type="ndarray")
+        if not len(pairs):
+            return None
+        diff = p[pairs[:, 0]] - p[pairs[:, 1]]
+        dist = np.sqrt((diff * diff).sum(-1))
+        keep = dist < limit
+        if not keep.any():
+            return None
+        pairs, dist = pairs[keep], dist[keep]
+        first = int(np.lexsort((pairs[:, 1], pairs[:, 0]))[0])
+        return int(pairs[first, 0]), int(pairs[first, 1]), float(dist[first])
 
     def sample_goals_in_band(self, starts: np.ndarray, band: Tuple[float, float], min_separation: float,
                              rng: np.random.Generator) -> np.ndarray:

@@ -1,6 +1,7 @@
 """The single-agent goal-conditioned safe navigation environment (Gymnasium)."""
 from __future__ import annotations
 
+import math
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import gymnasium as gym
@@ -13,6 +14,8 @@ from .formats import flat_space, flatten_observation
 from .world import World
 
 _RESET_OPTIONS = ("start", "goal", "goal_distance")
+#: action dtypes that :meth:`SafeNavigationEnv.step` reads without :func:`check_action` (same result)
+_FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 class _dict_format_only:
@@ -246,6 +249,7 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         self._world: Optional[World] = None
         self._pos = np.zeros(2)
         self._goal = np.zeros(2)
+        self._goal_norm = np.zeros(2, dtype=np.float32)
         self._trail: List[np.ndarray] = []
         self._waypoints: Optional[np.ndarray] = None
         #: positions of the parked agents of the episode (``parked_agents``), ``(M, 2)``
@@ -276,11 +280,12 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
             obs = {"observation": img, "achieved_goal": achieved, "desired_goal": self._goal_image.copy()}
         else:
             p = self.normalize(self._pos)
-            obs = {"observation": p, "achieved_goal": p.copy(), "desired_goal": self.normalize(self._goal)}
+            obs = {"observation": p, "achieved_goal": p.copy(), "desired_goal": self._goal_norm.copy()}
         return flatten_observation(obs) if self.observation_format == "flat" else obs
 
     def _info(self, cost: float) -> Dict[str, Any]:
-        dist = float(np.linalg.norm(self._pos - self._goal))
+        d = self._pos - self._goal
+        dist = math.sqrt(d.dot(d))  # np.linalg.norm of a vector, without its dispatch
         return {
             "cost": cost,
             "position": self._pos.copy(),
@@ -337,15 +342,19 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
         sc = self.scenario
         start, goal = self.draw_problem(self.np_random, options)
         self._goal = goal
+        self._goal_norm = self.normalize(goal)
         if self.sensor is not None:
             self._goal_image = self.sensor.render(goal)
         if self.parked_fraction < 1.0 and self.np_random.random() >= self.parked_fraction:
             self._parked = np.zeros((0, 2))  # an episode without them
         else:
             self._parked = self.draw_parked(self.np_random, start, goal)
-        self._world = World(sc.size, sc.boxes, np.vstack([start[None], self._parked]), sc.agent_radius, self.substeps)
-        for i in range(1, 1 + len(self._parked)):
-            self._world.park(i)
+        agents = np.vstack([start[None], self._parked])
+        # one agent restarts in the space of the previous episode (the same physics as a new one)
+        if self._world is None or not self._world.restart(agents):
+            self._world = World(sc.size, sc.boxes, agents, sc.agent_radius, self.substeps)
+            for i in range(1, 1 + len(self._parked)):
+                self._world.park(i)
         self._pos = start.copy()
         self._trail = [start.copy()]
         cost = float(sc.field.cost(start))
@@ -356,17 +365,27 @@ class SafeNavigationEnv(NavigationEnvBase, gym.Env):
 
         ``reward`` is ``0.0`` when the step reaches the goal (``terminated``), ``-1.0`` otherwise.
         """
-        if self._world is None:
+        world = self._world
+        if world is None:
             raise RuntimeError("call reset() before step()")
-        a = check_action(action)
-        a = np.clip(a, -1.0, 1.0)
+        if type(action) is np.ndarray and action.dtype in _FLOAT_DTYPES and action.shape == (2,):
+            x, y = action.tolist()  # exactly check_action's float64 values
+            if not (math.isfinite(x) and math.isfinite(y)):
+                check_action(action)  # raises, saying what is wrong
+        else:
+            x, y = check_action(action).tolist()
+        x, y = min(max(x, -1.0), 1.0), min(max(y, -1.0), 1.0)  # np.clip of finite values
         if self.action_noise > 0:
-            a = a + self.np_random.normal(0.0, self.action_noise, size=2)
-        moves = np.zeros((1 + len(self._parked), 2))
-        moves[0] = a * self.action_scale
-        trace, _ = self._world.step(moves)
-        pts = trace[:, 0]
-        cost = float(self.scenario.field.cost(pts).max())
+            nx, ny = self.np_random.normal(0.0, self.action_noise, size=2).tolist()
+            x, y = x + nx, y + ny
+        scale = self.action_scale
+        if len(self._parked):
+            moves = np.zeros((1 + len(self._parked), 2))
+            moves[0] = (x * scale, y * scale)
+            pts = world.step(moves)[0][:, 0]
+        else:
+            pts = world.step_single(x * scale, y * scale)
+        cost = self.scenario.field.peak_cost(pts)
         self._pos = pts[-1].copy()
         if self.render_mode is not None:
             self._trail.append(self._pos.copy())
