@@ -515,6 +515,15 @@ class SafeGoalTD3(OffPolicyAlgorithm):
             out = self.policy.pairwise(obs_a, obs_b, ("distance", "cost"), aggregate, chunk_size, progress, within)
         return out["distance"], out["cost"]
 
+    def pairwise_at(self, obs_a: np.ndarray, obs_b: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                    threads: Optional[int] = None, within: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """``(D, C)`` of the listed pairs only, ``obs_a[rows[p]]`` to ``obs_b[cols[p]]`` (ensemble
+        maximum; ``within`` as for :meth:`pairwise`); ``obs_a`` / ``obs_b`` may be encoded by
+        :meth:`encode_observations`."""
+        with torch_threads(inference_threads(threads)):
+            out = self.policy.pairwise_at(obs_a, obs_b, rows, cols, ("distance", "cost"), within=within)
+        return out["distance"], out["cost"]
+
     # ------------------------------------------------------------------ save / load
     def _excluded_save_params(self) -> List[str]:
         excluded = super()._excluded_save_params() + [

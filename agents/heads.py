@@ -108,11 +108,13 @@ def pair_head(head: EnsembleHead, parts, i0: int, i1: int, j0: int, j1: int,
 
 
 def pair_head_at(head: EnsembleHead, parts, rows: th.Tensor, cols: th.Tensor,
-                 actions: Optional[th.Tensor] = None) -> th.Tensor:
-    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``(rows[p], cols[p])`` (index tensors)."""
+                 actions: Optional[th.Tensor] = None, members: Optional[slice] = None) -> th.Tensor:
+    """Outputs ``(E, P, out)`` of ``head`` for the pairs ``(rows[p], cols[p])`` (index tensors);
+    ``members`` (a slice) evaluates only those ensemble members."""
     pre_a, pre_b, _ = parts
-    h = th.add(pre_a[:, rows, :], pre_b[:, cols, :])
-    return _finish_pairs(head, parts, h, actions, slice(None))
+    m = slice(None) if members is None else members
+    h = th.add(pre_a[m, rows, :], pre_b[m, cols, :])
+    return _finish_pairs(head, parts, h, actions, m)
 
 
 def _finish_pairs(head: EnsembleHead, parts, h: th.Tensor, actions: Optional[th.Tensor], m: slice) -> th.Tensor:

@@ -408,22 +408,7 @@ class SafeGoalPolicy(BasePolicy):
                              f"quantities={quantities!r}")
         if int(chunk_size) < 1:
             raise ValueError(f"chunk_size must be >= 1, got {chunk_size!r}")
-        a, b = self._pair_input(obs_a, "obs_a"), self._pair_input(obs_b, "obs_b")
-        n, m = len(a), len(b)
-        critics = {q: (self.critic if q == "distance" else self.cost_critic) for q in quantities}
-        codes: Dict[int, Tuple[th.Tensor, th.Tensor]] = {}  # a shared encoder encodes once
-
-        def code(fe: GoalPairExtractor, x: Union[th.Tensor, EncodedObservations]) -> th.Tensor:
-            return x.codes[id(fe)] if isinstance(x, EncodedObservations) else encode_chunked(fe, x)
-
-        def encoded(fe: GoalPairExtractor) -> Tuple[th.Tensor, th.Tensor]:
-            if id(fe) not in codes:
-                codes[id(fe)] = (code(fe, a), code(fe, b))
-            return codes[id(fe)]
-
-        code_a, code_b = encoded(self.actor.features_extractor)
-        actor_parts = first_layer_products((self.actor.norm(code_a), self.actor.norm(code_b)), self.actor.mu)
-        critic_parts = {q: first_layer_products(encoded(c.features_extractor), c.head) for q, c in critics.items()}
+        n, m, critics, actor_parts, critic_parts = self._pair_parts(obs_a, obs_b, quantities)
         out = {q: np.empty((n, m) if aggregate != "none" else (c.n_members, n, m), dtype=np.float32)
                for q, c in critics.items()}
         if n == 0 or m == 0:
@@ -451,6 +436,73 @@ class SafeGoalPolicy(BasePolicy):
                         views[q][i0:i1, j0:j1] = v.reshape(i1 - i0, j1 - j0)
         if bar is not None:
             bar.close()
+        return out
+
+    def _pair_parts(self, obs_a: Any, obs_b: Any, quantities: Sequence[str]):
+        """What :meth:`pairwise` and :meth:`pairwise_at` share: ``(n, m, critics, actor_parts,
+        critic_parts)``, each observation encoded once per encoder and its first-layer products."""
+        a, b = self._pair_input(obs_a, "obs_a"), self._pair_input(obs_b, "obs_b")
+        critics = {q: (self.critic if q == "distance" else self.cost_critic) for q in quantities}
+        codes: Dict[int, Tuple[th.Tensor, th.Tensor]] = {}  # a shared encoder encodes once
+
+        def code(fe: GoalPairExtractor, x: Union[th.Tensor, EncodedObservations]) -> th.Tensor:
+            return x.codes[id(fe)] if isinstance(x, EncodedObservations) else encode_chunked(fe, x)
+
+        def encoded(fe: GoalPairExtractor) -> Tuple[th.Tensor, th.Tensor]:
+            if id(fe) not in codes:
+                codes[id(fe)] = (code(fe, a), code(fe, b))
+            return codes[id(fe)]
+
+        code_a, code_b = encoded(self.actor.features_extractor)
+        actor_parts = first_layer_products((self.actor.norm(code_a), self.actor.norm(code_b)), self.actor.mu)
+        critic_parts = {q: first_layer_products(encoded(c.features_extractor), c.head) for q, c in critics.items()}
+        return len(a), len(b), critics, actor_parts, critic_parts
+
+    @th.inference_mode()
+    def pairwise_at(
+        self,
+        obs_a: Any,
+        obs_b: Any,
+        rows: np.ndarray,
+        cols: np.ndarray,
+        quantities: Sequence[str] = ("distance", "cost"),
+        chunk_size: int = 8192,
+        within: Optional[float] = None,
+    ) -> Dict[str, np.ndarray]:
+        """:meth:`pairwise` (ensemble maximum) of the listed pairs only: ``obs_a[rows[p]]`` to
+        ``obs_b[cols[p]]``, as float32 arrays of ``len(rows)`` values. ``within`` as for
+        :meth:`pairwise`: exact only below it (a pair one distance member puts at ``within`` or
+        beyond keeps that member's distance and an infinite cost). Where a cheap bound rules most
+        pairs out (far apart on a large map), this scores the few that are left."""
+        self._check_quantities(quantities)
+        if within is not None and "distance" not in quantities:
+            raise ValueError(f"within needs the distance among the quantities, got {quantities!r}")
+        r = np.asarray(rows, dtype=np.int64).ravel()
+        c = np.asarray(cols, dtype=np.int64).ravel()
+        if r.shape != c.shape:
+            raise ValueError(f"rows and cols must have the same length, got {r.shape} and {c.shape}")
+        n, m, critics, actor_parts, critic_parts = self._pair_parts(obs_a, obs_b, quantities)
+        if len(r) and (r.min() < 0 or r.max() >= n or c.min() < 0 or c.max() >= m):
+            raise ValueError(f"pair indices out of range for {n} x {m} observations")
+        out = {q: np.empty(len(r), dtype=np.float32) for q in critics}
+        step = max(1, int(chunk_size))
+        for p0 in range(0, len(r), step):
+            rr, cc = th.from_numpy(r[p0:p0 + step]), th.from_numpy(c[p0:p0 + step])
+            actions = th.tanh(pair_head_at(self.actor.mu, actor_parts, rr, cc))
+            keep = th.arange(len(rr))
+            if within is not None:
+                dist = critics["distance"]
+                bound = dist.expected(pair_head_at(dist.head, critic_parts["distance"], rr, cc, actions,
+                                                   slice(0, 1)))[0]
+                out["distance"][p0:p0 + len(rr)] = bound.numpy()
+                if "cost" in out:
+                    out["cost"][p0:p0 + len(rr)] = math.inf
+                keep = th.nonzero(bound < within).squeeze(1)
+                if keep.numel() == 0:
+                    continue
+            for q, crit in critics.items():
+                v = crit.expected(pair_head_at(crit.head, critic_parts[q], rr[keep], cc[keep], actions[:, keep]))
+                out[q][p0 + keep.numpy()] = aggregate_ensemble(v, "max").numpy()
         return out
 
     @staticmethod

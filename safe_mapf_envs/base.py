@@ -113,6 +113,20 @@ class NavigationEnvBase:
         """Observations in ``[0, 1]`` back to world-unit positions."""
         return np.asarray(observations, dtype=np.float64) * self.scenario.size_arr
 
+    def min_steps(self, obs_a: np.ndarray, obs_b: np.ndarray) -> np.ndarray:
+        """A lower bound of the steps from each vector observation of ``obs_a`` to within
+        ``goal_threshold`` of each of ``obs_b``: ``(N, M)``, the straight-line distance less the
+        threshold over the longest step (an action is clipped to ``[-1, 1]`` per axis, so a step
+        moves at most ``sqrt(2) * action_scale``). No walls are looked at, so it costs a distance
+        matrix; a planner reads its critics only where this bound is short
+        (:class:`~agents.search.graph.NodePairwise`'s ``bound``). Vector observations only."""
+        if self.obs_type != "vector":
+            raise ValueError(f"min_steps needs vector observations (positions); this env observes {self.obs_type}s")
+        a = self.denormalize(np.asarray(obs_a).reshape(-1, 2))
+        b = self.denormalize(np.asarray(obs_b).reshape(-1, 2))
+        gap = np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)) - self.goal_threshold
+        return np.maximum(gap, 0.0) / (np.sqrt(2.0) * self.action_scale)
+
     def sample_states(
         self, n: int, rng: Optional[np.random.Generator] = None, max_cost: Optional[float] = None
     ) -> np.ndarray:

@@ -153,3 +153,26 @@ def test_pairwise_within_needs_the_maximum_of_the_distances(vector_policy):
         vector_policy.pairwise(x, x, aggregate="mean", within=3.0)
     with pytest.raises(ValueError, match="within needs"):
         vector_policy.pairwise(x, x, quantities=("cost",), within=3.0)
+
+
+@pytest.mark.parametrize("chunk_size", [1, 5, 8192])
+def test_pairwise_at_scores_the_listed_pairs_as_pairwise_does(vector_policy, chunk_size):
+    rng = np.random.default_rng(5)
+    a = rng.random((13, 2), dtype=np.float32)
+    b = rng.random((9, 2), dtype=np.float32)
+    rows, cols = rng.integers(0, 13, 40), rng.integers(0, 9, 40)
+    full = vector_policy.pairwise(a, b)
+    got = vector_policy.pairwise_at(a, b, rows, cols, chunk_size=chunk_size)
+    for q in ("distance", "cost"):
+        assert got[q].shape == (40,) and got[q].dtype == np.float32
+        np.testing.assert_allclose(got[q], full[q][rows, cols], rtol=1e-5, atol=1e-5)
+    within = float(np.median(full["distance"]))
+    screened = vector_policy.pairwise(a, b, within=within)
+    near = vector_policy.pairwise_at(a, b, rows, cols, chunk_size=chunk_size, within=within)
+    for q in ("distance", "cost"):  # the same values as pairwise's, infinite costs included
+        np.testing.assert_allclose(near[q], screened[q][rows, cols], rtol=1e-5, atol=1e-5)
+    assert vector_policy.pairwise_at(a, b, [], [])["distance"].shape == (0,)
+    with pytest.raises(ValueError, match="out of range"):
+        vector_policy.pairwise_at(a, b, [13], [0])
+    with pytest.raises(ValueError, match="same length"):
+        vector_policy.pairwise_at(a, b, [1, 2], [0])
