@@ -24,8 +24,9 @@ goal only (doubling until a path exists; ``MultiAgentPlan.c_max`` reports the la
 the graph stays as safe as asked; with ``relax_cost=False`` the plan is ``"infeasible"`` instead. If CBS runs out of
 time, a second call with a looser suboptimality bound (``fallback_suboptimality``) usually finds a plan. Every
 solver call is budgeted in work (``expansion_limit``, scaled down on dense graphs, ``prioritized_expansions_per_agent``,
-``repair_expansions_per_agent``, ``stepper_expansions_per_agent``) and no wall clock, so a plan is a function of the
-problem and the code, the same on an idle and a loaded machine (``time_limit`` adds a wall-clock limit on request).
+``repair_expansions_per_agent``, ``stepper_expansions_per_agent``, ``lacam_expansions_per_agent``) and no wall
+clock, so a plan is a function of the problem and the code, the same on an idle and a loaded machine (``time_limit``
+adds a wall-clock limit on request).
 
 Only observations and critic outputs enter the planner; positions never do.
 """
@@ -53,6 +54,7 @@ from .graph import (
 )
 from .mapf import CBSResult, CBSSolver, Proximity
 from .mapf.instance import MapfInstance
+from .mapf.lacam import solve_lacam
 from .mapf.lns import solve_lns
 from .mapf.paths import spread_mode
 from .mapf.pibt import solve_pibt
@@ -64,7 +66,7 @@ from .sparsify import two_way_consistent
 from .waypoints import waypoints_from_paths
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
-SOLVERS = ("auto", "cbs", "prioritized", "lns", "pibt")
+SOLVERS = ("auto", "cbs", "prioritized", "lns", "pibt", "lacam")
 #: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
 #: large-neighbourhood repair where CBS / ECBS runs out of its budget, the priority inheritance
 #: stepper where prioritised planning does).
@@ -86,6 +88,10 @@ DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
 #: default ``stepper_expansions_per_agent``: the priority inheritance stepper's budget per agent
 #: (222 agents on the 1000-node buffer graph take 2,300 to 2,600 per agent)
 DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
+#: default ``lacam_expansions_per_agent``: the configuration search's budget per agent (its first plan for
+#: 100 agents on a hard problem of the 1000-node buffer graph takes about 520,000 in all, 1.5 s; what is left
+#: goes to improving it)
+DEFAULT_LACAM_EXPANSIONS_PER_AGENT = 20_000
 
 
 def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
@@ -131,8 +137,8 @@ class MultiAgentPlan:
         predicted_cost: per agent, the predicted cost of its route (sum over its edges).
         problem: the problem graph the plan was made on (node observations, dense ``D`` and
             ``C``, the pruned graph), for execution, plots and inspection.
-        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"``, ``"pibt"``
-            or ``"single"``; ``""`` when none ran).
+        solver: which solver made the plan (``"cbs"``, ``"prioritized"``, ``"lns"``, ``"pibt"``,
+            ``"lacam"`` or ``"single"``; ``""`` when none ran).
     """
 
     status: str
@@ -225,7 +231,11 @@ class BufferPlanner:
             conflict is left; solves crowds where prioritised planning gives up), ``"pibt"`` (the priority
             inheritance stepper, :func:`~agents.search.mapf.pibt.solve_pibt`: all agents step together, an agent in
             the way of a more urgent one is pushed off its node; solves the crowds of the most agents a
-            problem on the graph places, with long makespans) or ``"auto"`` (default): ``"cbs"`` for up to
+            problem on the graph places, with long makespans), ``"lacam"`` (the search over the agents' joint
+            configurations with that stepping as its successor generator,
+            :func:`~agents.search.mapf.lacam.solve_lacam`: complete, so an impossible problem small enough to
+            exhaust is reported ``"infeasible"``; its plan improves with its budget,
+            ``lacam_expansions_per_agent``) or ``"auto"`` (default): ``"cbs"`` for up to
             ``AUTO_SEARCH_AGENTS`` (20) agents, then ``"lns"`` if CBS / ECBS runs out of its budget (status
             ``"timeout"``), else ``"prioritized"``, then ``"pibt"`` if prioritised planning gives up (status
             ``"timeout"``; not the repair: where prioritised planning gives up on the 1000-node buffer graph, the
@@ -239,10 +249,13 @@ class BufferPlanner:
             all agents and restarts, per agent (``None``: none).
         repair_expansions_per_agent: the work budget of the large-neighbourhood repair, in search expansions over
             the initial plan and the repair, per agent (``None``: none).
-        repair_seed: seeds the repair's choice of the agents re-planned together (an integer; the same seed, the
-            same plan).
+        repair_seed: seeds the repair's choice of the agents re-planned together, and the configuration search's
+            tie-breaks (an integer; the same seed, the same plan).
         stepper_expansions_per_agent: the work budget of the priority inheritance stepper, in candidate moves
             examined, per agent (``None``: none).
+        lacam_expansions_per_agent: the work budget of the configuration search (``solver="lacam"``), per agent
+            (``None``: none, then it runs until its plan is proven optimal): candidate moves, constraints and
+            repaired edges; what is left after the first plan goes to improving it.
         time_limit: wall-clock seconds for one solver call (``None``, the default: no wall-clock limit, the budgets
             in work alone end a call). A limit in seconds makes plans depend on the machine's load; either ends
             the call with status ``"timeout"`` (the message says which).
@@ -295,6 +308,7 @@ class BufferPlanner:
         repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
         repair_seed: int = 0,
         stepper_expansions_per_agent: Optional[int] = DEFAULT_STEPPER_EXPANSIONS_PER_AGENT,
+        lacam_expansions_per_agent: Optional[int] = DEFAULT_LACAM_EXPANSIONS_PER_AGENT,
         time_limit: Optional[float] = None,
         relax_cost: bool = True,
         fallback_suboptimality: Optional[float] = 2.0,
@@ -333,7 +347,8 @@ class BufferPlanner:
         for name, lim in (("expansion_limit", expansion_limit),
                           ("prioritized_expansions_per_agent", prioritized_expansions_per_agent),
                           ("repair_expansions_per_agent", repair_expansions_per_agent),
-                          ("stepper_expansions_per_agent", stepper_expansions_per_agent)):
+                          ("stepper_expansions_per_agent", stepper_expansions_per_agent),
+                          ("lacam_expansions_per_agent", lacam_expansions_per_agent)):
             if lim is not None and not (isinstance(lim, (int, np.integer)) and not isinstance(lim, bool)
                                         and lim >= 1):
                 raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
@@ -351,9 +366,10 @@ class BufferPlanner:
             raise ValueError(f"max_leg must be > 0 and needs a second_opinion to read legs with, got {max_leg!r}")
         self.solver = solver
         limits = (expansion_limit, prioritized_expansions_per_agent, repair_expansions_per_agent,
-                  stepper_expansions_per_agent)
+                  stepper_expansions_per_agent, lacam_expansions_per_agent)
         (self.expansion_limit, self.prioritized_expansions_per_agent, self.repair_expansions_per_agent,
-         self.stepper_expansions_per_agent) = (None if v is None else int(v) for v in limits)
+         self.stepper_expansions_per_agent, self.lacam_expansions_per_agent) = (None if v is None else int(v)
+                                                                                for v in limits)
         self.repair_seed = int(repair_seed)
         self.time_limit = None if time_limit is None else float(time_limit)
         self.relax_cost = bool(relax_cost)
@@ -401,7 +417,8 @@ class BufferPlanner:
             solver=self.solver, expansion_limit=self.expansion_limit, repair_seed=self.repair_seed,
             prioritized_expansions_per_agent=self.prioritized_expansions_per_agent,
             repair_expansions_per_agent=self.repair_expansions_per_agent, time_limit=self.time_limit,
-            stepper_expansions_per_agent=self.stepper_expansions_per_agent, relax_cost=self.relax_cost,
+            stepper_expansions_per_agent=self.stepper_expansions_per_agent,
+            lacam_expansions_per_agent=self.lacam_expansions_per_agent, relax_cost=self.relax_cost,
             fallback_suboptimality=self.fallback_suboptimality, budget_labels=self.budget_labels,
             max_edges=self.max_edges, cost_guard=self.cost_guard, detour=self.detour, spread_routes=self.spread_routes,
             max_leg=self.max_leg)
@@ -540,6 +557,8 @@ class BufferPlanner:
             return self._repair(inst, scale), "lns"
         if solver == "pibt":
             return self._step(inst, scale), "pibt"
+        if solver == "lacam":
+            return self._search_configurations(inst, scale), "lacam"
         if solver == "prioritized":
             # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
             # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
@@ -580,6 +599,11 @@ class BufferPlanner:
         """The priority inheritance stepper with this planner's budget (times ``scale``)."""
         return solve_pibt(inst, expansion_limit=_scaled(_times(self.stepper_expansions_per_agent, inst.n_agents),
                                                         scale), time_limit=self.time_limit)
+
+    def _search_configurations(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
+        """The LaCAM* configuration search with this planner's budget (times ``scale``) and seed."""
+        return solve_lacam(inst, expansion_limit=_scaled(_times(self.lacam_expansions_per_agent, inst.n_agents),
+                                                         scale), time_limit=self.time_limit, seed=self.repair_seed)
 
     def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
         """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""

@@ -271,7 +271,7 @@ def test_planner_budget_is_counted_in_expansions():
     assert plan.status == "timeout" and plan.solver == "lns", plan.message
     assert "expansion limit of 30" in plan.message and "expansion limit of 10" in plan.message
     with pytest.raises(ValueError, match="solver"):
-        make_planner(pts, euclid_pairwise(), solver="lacam")
+        make_planner(pts, euclid_pairwise(), solver="nope")
     with pytest.raises(ValueError, match="expansion_limit"):
         make_planner(pts, euclid_pairwise(), expansion_limit=0)
     with pytest.raises(ValueError, match="prioritized_expansions_per_agent"):

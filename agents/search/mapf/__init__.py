@@ -57,7 +57,11 @@ Many agents
     planning gives up. :func:`solve_pibt`: a joint stepper by priority inheritance with
     backtracking (:mod:`agents.search.mapf.pibt`): all agents advance together, and an agent in
     the way of a more urgent one is pushed off its node; it untangles crowds that one-at-a-time
-    planning cannot, with long makespans. Budgets of every solver can be counted in expansions
+    planning cannot, with long makespans. :func:`solve_lacam`: a complete, anytime search over
+    the agents' joint configurations with that stepping as its successor generator
+    (:mod:`agents.search.mapf.lacam`, in the manner of LaCAM*): it solves hundreds of agents on
+    crowded grids, reports ``"infeasible"`` where it exhausts the configurations, and improves
+    its plan towards the optimum with more budget. Budgets of every solver can be counted in expansions
     (``expansion_limit``), so a result does not depend on the machine's load.
 
 Feasibility
@@ -70,7 +74,7 @@ Public API
     :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
     :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
     :func:`validate` to check any solution independently, :func:`solve_prioritized`,
-    :func:`solve_lns`, :func:`solve_pibt`,
+    :func:`solve_lns`, :func:`solve_pibt`, :func:`solve_lacam`,
     :func:`joint_feasible`, the constraint and conflict types,
     and the MovingAI benchmark loaders :func:`load_map`, :func:`load_scen`,
     :func:`load_instance`, :func:`grid_graph`.
@@ -86,7 +90,7 @@ Modules, one concept each
     ``constraints``, ``symmetry`` (corridor, pseudo-corridor and rectangle reasoning), ``instance``, ``validate``,
     ``movingai`` (benchmark files), ``sipp`` (safe intervals and the single-agent search over
     them), ``prioritized`` (prioritised planning), ``lns`` (the large-neighbourhood repair),
-    ``pibt`` (the priority inheritance stepper),
+    ``pibt`` (the priority inheritance stepper), ``lacam`` (the search over joint configurations),
     ``conflict_table`` (planning with conflicts allowed, its low level) and ``feasibility`` (the
     exhaustive check).
 """
@@ -107,6 +111,7 @@ from .constraints import (
 from .ctnode import CTNode
 from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
+from .lacam import solve_lacam
 from .lns import solve_lns
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
 from .paths import SPREAD_MODES
@@ -124,5 +129,6 @@ __all__ = [
     "RangeConstraint", "SEMI_CARDINAL", "SPREAD_MODES", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS",
     "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
-    "load_map", "load_scen", "solve_cbs", "solve_lns", "solve_pibt", "solve_prioritized", "validate",
+    "load_map", "load_scen", "solve_cbs", "solve_lacam", "solve_lns", "solve_pibt", "solve_prioritized",
+    "validate",
 ]
