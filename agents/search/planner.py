@@ -92,6 +92,10 @@ DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
 #: 100 agents on a hard problem of the 1000-node buffer graph takes about 520,000 in all, 1.5 s; what is left
 #: goes to improving it)
 DEFAULT_LACAM_EXPANSIONS_PER_AGENT = 20_000
+#: default ``d_max`` (predicted steps): edges of the graph are shorter
+DEFAULT_D_MAX = 7.0
+#: the cost :meth:`BufferPlanner.from_agent` with a ``bound`` gives the pairs it never read (never an edge)
+UNREAD_COST = 1e9
 
 
 def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
@@ -296,7 +300,7 @@ class BufferPlanner:
         C: np.ndarray,
         pairwise: PairwiseFn,
         *,
-        d_max: float = 7.0,
+        d_max: float = DEFAULT_D_MAX,
         c_max: float = math.inf,
         endpoint_edges: int = 3,
         proximity_radius: Optional[float] = 1.5,
@@ -400,13 +404,27 @@ class BufferPlanner:
         return self._buffer_graph
 
     @classmethod
-    def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max", **kwargs) -> "BufferPlanner":
+    def from_agent(cls, agent, observations: np.ndarray, aggregate: str = "max",
+                   bound: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
+                   **kwargs) -> "BufferPlanner":
         """Compute ``D`` and ``C`` with ``agent.pairwise`` (ensemble aggregated by ``aggregate``);
-        ``detour`` defaults to :func:`~agents.search.models.default_detour` of ``agent``."""
+        ``detour`` defaults to :func:`~agents.search.models.default_detour` of ``agent``.
+
+        ``bound(obs_a, obs_b)``: a lower bound of the distance in steps that needs no critic, such
+        as the environment's ``min_steps`` (vector observations). Then only the pairs it puts
+        below ``d_max`` are read by the critics, here and when starts and goals are attached (see
+        :class:`~agents.search.graph.NodePairwise`): on a large map, where most pairs are far
+        apart, a graph of thousands of nodes takes seconds instead of minutes. ``D`` and ``C`` are
+        then exact only below ``d_max`` (all the planner reads); a pair the bound rules out keeps
+        the bound as its distance and :data:`UNREAD_COST` as its cost."""
         obs = np.asarray(observations)
         kwargs.setdefault("detour", default_detour(agent))
-        pairwise = NodePairwise(agent, obs, aggregate)  # the nodes are encoded once
-        D, C = pairwise(obs, obs)
+        pairwise = NodePairwise(agent, obs, aggregate, bound=bound)  # the nodes are encoded once
+        if bound is None:
+            D, C = pairwise(obs, obs)
+        else:
+            D, C = pairwise.within(obs, obs, float(kwargs.get("d_max", DEFAULT_D_MAX)))
+            C = np.where(np.isfinite(C), C, UNREAD_COST)
         return cls(obs, D, C, pairwise, **kwargs)
 
     def options(self) -> Dict[str, Any]:

@@ -57,3 +57,19 @@ def test_a_bound_leaves_the_near_pairs_exact_and_reads_no_far_pair():
     far = ~candidates
     np.testing.assert_allclose(D[far], env.min_steps(nodes, ends)[far], rtol=1e-5)
     assert (D[far] >= d_max).all() and np.isinf(C[far]).all()
+
+
+def test_a_planner_built_with_a_bound_plans_as_one_built_without():
+    from agents.search.planner import UNREAD_COST, BufferPlanner
+
+    model = SafeGoalTD3("MultiInputPolicy", "SafeCentralObstacle-v0", seed=1, device="cpu", policy_kwargs=SMALL)
+    env = gym.make("SafeCentralObstacle-v0").unwrapped
+    obs = env.observations_at(env.sample_states(80, np.random.default_rng(1)))
+    # an untrained critic puts far pairs close; a large d_max keeps the comparison about the bound
+    plain = BufferPlanner.from_agent(model, obs, d_max=40.0)
+    fast = BufferPlanner.from_agent(model, obs, d_max=40.0, bound=env.min_steps)
+    near = (env.min_steps(obs, obs) < 40.0) & (plain.D < 40.0)
+    np.testing.assert_allclose(fast.D[near], plain.D[near], rtol=1e-5)
+    assert (fast.D[~near] >= 40.0).all() and (fast.C[fast.D >= 40.0] == UNREAD_COST).all()
+    np.fill_diagonal(near, False)
+    assert fast.buffer_graph.n_edges == near.sum() > 0
