@@ -2,6 +2,7 @@
 
     python examples/evaluate_agents.py                          # SafeCentralObstacle-v0
     python examples/evaluate_agents.py --env SafeApartment2-v0
+    python examples/evaluate_agents.py --map examples/data/maps/scatter-64-64.map
     python examples/evaluate_agents.py --unconstrained runs/u/model.zip --constrained runs/c/model.zip
 
 On held-out random start-goal pairs drawn with a fixed seed (ground truth is used to pick
@@ -35,6 +36,7 @@ from agents import SafeGoalTD3, load_pretrained
 from agents.encoders import is_image_space
 from agents.evaluation import distance_rank_correlation, run_episodes, sample_problems
 from agents.training import default_eval_distances
+from baselines.cli import env_for_map
 
 
 @dataclass
@@ -78,13 +80,15 @@ def time_matrices(model: SafeGoalTD3, nodes: np.ndarray, threads: int) -> dict:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default=Settings.env_id, help="environment id (default %(default)s)")
+    p.add_argument("--map", dest="map_file", default=None, metavar="FILE",
+                   help="a map of one's own in place of --env's (see safe-mapf train --map)")
     p.add_argument("--unconstrained", default=None, help="checkpoint (default: the shipped one)")
     p.add_argument("--constrained", default=None, help="checkpoint (default: the shipped one)")
     p.add_argument("--seed", type=int, default=Settings.seed)
     p.add_argument("--episodes", type=int, default=Settings.n_episodes)
     p.add_argument("--skip-timing", action="store_true")
     args = p.parse_args()
-    s = Settings(env_id=args.env, seed=args.seed, n_episodes=args.episodes)
+    s = Settings(env_id=env_for_map(args.env, args.map_file), seed=args.seed, n_episodes=args.episodes)
     lo, hi = default_eval_distances(s.env_id)
     s.max_distance = lo if s.max_distance is None else s.max_distance
     s.pair_max_distance = hi if s.pair_max_distance is None else s.pair_max_distance
