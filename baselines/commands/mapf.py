@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cbs: optimal CBS, or ECBS with --suboptimality (default); lacam: the complete, anytime "
                         "search over joint configurations (agents.search.mapf.solve_lacam)")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="seconds (default 60; lacam: a safety net beside --expansion-limit)")
+                   help="seconds (default 60); lacam: a safety net beside --expansion-limit")
     p.add_argument("--suboptimality", type=float, default=1.0, metavar="W",
                    help="cbs: 1 for optimal CBS (default); W > 1 runs ECBS with cost <= W x optimal")
     p.add_argument("--heuristic", choices=("wdg", "dg", "cg", "none"), default="wdg",
