@@ -35,13 +35,15 @@ def _spawn(args, **kw):
                             text=True, env=env, **kw)
 
 
-def _wait_for_rows(path, n, proc, limit=120.0):
-    """Wait until ``path`` has ``n`` rows (header aside) or the process ends."""
+def _freeze_at_rows(path, n, proc, limit=120.0):
+    """Stop the process (SIGSTOP) as soon as ``path`` has ``n`` rows (header aside): its rows come
+    tens of milliseconds apart, so it must be frozen at once to be caught part of the way."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < limit and proc.poll() is None:
         if path.exists() and path.read_text().count("\n") > n:
+            proc.send_signal(signal.SIGSTOP)
             return
-        time.sleep(0.05)
+        time.sleep(0.001)
 
 
 def test_a_used_folder_is_refused_and_overwrite_removes_only_what_evaluate_wrote(reference, tmp_path, capsys):
@@ -93,11 +95,13 @@ def test_an_interrupted_or_killed_run_resumes_to_the_rows_of_an_uninterrupted_on
     out = tmp_path / "out"
     args = ["evaluate", *SMALL, "--out", str(out)]
     proc = _spawn(args)
-    _wait_for_rows(out / "runs.csv", 3, proc)
-    proc.send_signal(sig)
-    _, err = proc.communicate(timeout=120)
+    _freeze_at_rows(out / "runs.csv", 1, proc)
     partial = rows(out / "runs.csv")
-    assert 3 <= len(partial) < len(rows(reference / "runs.csv"))  # stopped part of the way
+    proc.send_signal(sig)
+    proc.send_signal(signal.SIGCONT)
+    _, err = proc.communicate(timeout=120)
+    assert rows(out / "runs.csv") == partial  # nothing written after the signal
+    assert 1 <= len(partial) < len(rows(reference / "runs.csv"))  # stopped part of the way
     assert partial == rows(reference / "runs.csv")[:len(partial)]
     if sig == signal.SIGINT:
         assert proc.returncode == 130
