@@ -180,8 +180,9 @@ def run_animation(setup: EvaluationSetup, method: Method, path, n_agents: int = 
     env.close()
     agents = f"{n_agents} agent{'s' if n_agents != 1 else ''}"
     outcome = "all arrived" if ex.success else f"{int(ex.reached.sum())}/{n_agents} arrived"
+    contacts = f", {ex.collisions} contact{'s' if ex.collisions != 1 else ''} between agents" if n_agents > 1 else ""
     title = (f"{setup.env_id}, {method.label}, {agents} ({difficulty}): {outcome}, "
-             f"max cost {ex.cost.max():.1f}")
+             f"max cost {ex.cost.max():.1f}{contacts}")
     frames = execution_frames(field, ex.trajectories, prob.goals, threshold, waypoints=wp or None, every=every,
                               title=title)
     return write_gif(frames, path, fps=fps)

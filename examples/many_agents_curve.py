@@ -4,8 +4,9 @@ Reads the ``runs.csv`` of ``safe-mapf evaluate`` output folders (one per environ
 the folder's name), prints one Markdown table per folder and draws one figure: per agent count,
 CSR (the share of runs in which every agent arrived), ISR (the mean share of agents arrived),
 the sum of costs per agent and the makespan (POGEMA's definitions: an agent that never arrives
-counts the run's length), and our largest cumulative safety cost over agents and contacts
-between agents (means over all runs). The figures of ``docs/many_agents.md`` come from::
+counts the run's length), and our largest cumulative safety cost over agents, the contacts
+between agents and the safety rate (the share of agents that never touched another; means over
+all runs). The figures of ``docs/many_agents.md`` come from::
 
     safe-mapf evaluate --agents 1 5 10 20 50 100 200 --problems 10 --difficulty hard --methods ours \\
         --no-figure --out examples/many_agents/central_obstacle
@@ -50,19 +51,21 @@ def cells(folder: Path, method: str) -> List[Dict[str, Any]]:
         rs = by_agents[a["agents"]]
         a["cost_all_mean"] = float(np.mean([float(r["cost_max"]) for r in rs]))
         a["contacts_all_mean"] = float(np.mean([float(r["collisions"]) for r in rs]))
+        a["safety_rate_all_mean"] = float(np.mean([float(r.get("safety_rate") or "nan") for r in rs]))
         a["planning_time_median"] = float(np.median([float(r["planning_time"]) for r in rs]))
     return sorted(out, key=lambda a: a["agents"])
 
 
 def markdown(name: str, rows: List[Dict[str, Any]]) -> str:
     head = ["agents", "runs", "CSR", "ISR", "sum of costs / agent", "makespan", "max cumulative cost",
-            "contacts", "planning time (median)"]
+            "contacts", "safety rate", "planning time (median)"]
     lines = [f"{name}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for a in rows:
         k = a["agents"]
         lines.append(f"| {k} | {a['runs']} | {100 * a['csr']:.0f}% | {100 * a['isr']:.1f}% | "
                      f"{a['soc_mean'] / k:.1f} | {a['makespan_mean']:.0f} | {a['cost_all_mean']:.1f} | "
-                     f"{a['contacts_all_mean']:.1f} | {a['planning_time_median']:.2f} s |")
+                     f"{a['contacts_all_mean']:.1f} | {100 * a['safety_rate_all_mean']:.1f}% | "
+                     f"{a['planning_time_median']:.2f} s |")
     return "\n".join(lines)
 
 
@@ -77,6 +80,8 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
         k = np.array([a["agents"] for a in rows])
         line, = axes[0].plot(k, [100 * a["isr"] for a in rows], "o-", label=f"{name}: ISR")
         axes[0].plot(k, [100 * a["csr"] for a in rows], "s--", color=line.get_color(), label=f"{name}: CSR")
+        axes[0].plot(k, [100 * a["safety_rate_all_mean"] for a in rows], "^:", color=line.get_color(),
+                     label=f"{name}: safety rate")
         axes[1].plot(k, [a["soc_mean"] / a["agents"] for a in rows], "o-", color=line.get_color(),
                      label=f"{name}: sum of costs / agent")
         axes[1].plot(k, [a["makespan_mean"] for a in rows], "s--", color=line.get_color(), label=f"{name}: makespan")
@@ -84,7 +89,7 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
                      label=f"{name}: max cumulative cost")
         axes[2].plot(k, [a["contacts_all_mean"] for a in rows], "s--", color=line.get_color(),
                      label=f"{name}: contacts")
-    titles = ["agents arrived (%)", "steps", "per run (mean)"]
+    titles = ["agents arrived, agents never touched (%)", "steps", "per run (mean)"]
     ticks = sorted({a["agents"] for rows in named.values() for a in rows})
     for ax, title in zip(axes, titles):
         ax.set_xscale("log")

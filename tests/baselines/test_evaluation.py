@@ -430,8 +430,8 @@ def test_many_agents_curve_reads_evaluate_rows(tmp_path, monkeypatch, capsys):
     rows = []
     for i, (arrival, steps) in enumerate((([5, 9], 9), ([6, -1], 300))):
         rows.append({"method": "ours", "agents": 2, "difficulty": "hard", "problem": i, "success": -1 not in arrival,
-                     "cost_max": 2.0 * (i + 1), "cost_mean": 1.0, "collisions": i, "steps": steps,
-                     "planning_time": 0.1, **mapf_metrics(np.array(arrival), steps)})
+                     "cost_max": 2.0 * (i + 1), "cost_mean": 1.0, "collisions": i, "safety_rate": 1.0 - i,
+                     "steps": steps, "planning_time": 0.1, **mapf_metrics(np.array(arrival), steps)})
     with open(folder / "runs.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -439,8 +439,9 @@ def test_many_agents_curve_reads_evaluate_rows(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["many_agents_curve.py", str(folder), "--out", str(tmp_path / "c.png")])
     runpy.run_path("examples/many_agents_curve.py", run_name="__main__")
     out = capsys.readouterr().out
-    # CSR 1 of 2 runs; ISR (1 + 0.5) / 2; sum of costs (14 + 306) / 2 over 2 agents; makespan (9 + 300) / 2
-    assert "| 2 | 2 | 50% | 75.0% | 80.0 | 154 | 3.0 | 0.5 | 0.10 s |" in out
+    # CSR 1 of 2 runs; ISR (1 + 0.5) / 2; sum of costs (14 + 306) / 2 over 2 agents; makespan (9 + 300) / 2;
+    # safety rate (1 + 0) / 2
+    assert "| 2 | 2 | 50% | 75.0% | 80.0 | 154 | 3.0 | 0.5 | 50.0% | 0.10 s |" in out
     assert (tmp_path / "c.png").stat().st_size > 0
     with open(folder / "runs.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["method", "agents"])
