@@ -34,6 +34,7 @@ from agents.search.repair import EdgeMemory
 from agents.search.sparsify import two_way_consistent
 
 from .anatomy import failures_field
+from .contact_anatomy import contact_reasons_field
 from .cost_anatomy import cost_split_field
 from .methods import METHODS, Method, execute
 
@@ -227,7 +228,7 @@ def placeable_agents(env_id: str, n_agents: int, n_nodes: int = 1000, seed: int 
 
 ROW_FIELDS = ("method", "agents", "difficulty", "problem", "success", "cost_max", "cost_mean", "collisions",
               "safety_rate", "steps", "planning_time", "plan_status", "reached", "isr", "soc", "makespan", "c_max",
-              "failures", "cost_split")
+              "failures", "cost_split", "contact_reasons")
 
 #: ``select_c_max`` draws its validation problems with the test seed plus this offset by default
 VALIDATION_SEED_OFFSET = 10_000
@@ -267,6 +268,7 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
         **mapf_metrics(ex.arrival, ex.steps),
         "c_max": method.c_max if method.search else math.inf, "failures": failures_field(ex.failures),
         "cost_split": cost_split_field(ex.cost_split, ex.cost),
+        "contact_reasons": contact_reasons_field(ex.contact_reasons),
     }
     return row, ex
 

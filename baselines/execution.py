@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 import numpy as np
 
@@ -39,6 +39,8 @@ class Execution:
     #: per agent, whether it touched another agent during the run (empty where agents pass
     #: through each other)
     touched: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: contacts per reason (:data:`~baselines.contact_anatomy.CONTACT_REASONS`; empty where not recorded)
+    contact_reasons: Dict[str, int] = field(default_factory=dict)
 
     @property
     def safety_rate(self) -> float:
@@ -66,18 +68,27 @@ def tally_step(infos, term, index: Dict[str, int], cost: np.ndarray, reached: np
 
 
 class Contacts:
-    """Contacts between agents over a run: each counted once, when it begins (:attr:`count`), and per
-    agent whether it touched another (:attr:`touched`)."""
+    """Contacts between agents over a run: each counted once, when it begins (:attr:`count`), per
+    agent whether it touched another (:attr:`touched`), and how many began for each reason
+    (:attr:`reasons`, with a ``reason`` function given to :meth:`update`)."""
 
     def __init__(self, index: Dict[str, int]) -> None:
         self.index = index
         self.count = 0
         self.touched = np.zeros(len(index), dtype=bool)
+        self.reasons: Dict[str, int] = {}
         self._under_way: set = set()
 
-    def update(self, now: set) -> None:
-        """Take one step's contacts under way (pairs of agent names, as :func:`tally_step` returns)."""
-        self.count += len(now - self._under_way)
+    def update(self, now: set, reason: Optional[Callable[[str, str], str]] = None) -> None:
+        """Take one step's contacts under way (pairs of agent names, as :func:`tally_step` returns);
+        ``reason(a, b)`` names why a contact that begins on this step began
+        (:func:`~baselines.contact_anatomy.contact_reason`)."""
+        new = now - self._under_way
+        self.count += len(new)
+        if reason is not None:
+            for pair in new:
+                why = reason(*sorted(pair))
+                self.reasons[why] = self.reasons.get(why, 0) + 1
         self._under_way = now
         for pair in now:
             for a in pair:

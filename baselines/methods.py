@@ -33,6 +33,7 @@ from agents.search.safety import SafetyLayer, team_positions
 from agents.search.stats import ACTIVITIES
 
 from .anatomy import AgentFailure, FailureTracker
+from .contact_anatomy import contact_reason
 from .execution import Contacts, Execution, geodesic_of, tally_step
 
 
@@ -185,6 +186,17 @@ def execute(
     tracker = FailureTracker(names, step_length, touch=2.0 * env.scenario.agent_radius + 0.5 * step_length)
     parked_at = np.full(k, -1)
     split = np.zeros((k, len(ACTIVITIES)))
+    goal_arr = np.asarray(goals, dtype=np.float64)
+    activity: Dict[str, str] = {}
+
+    def why(a: str, b: str) -> str:  # the reason of a contact that begins on this step
+        i, j = index[a], index[b]
+        return contact_reason(
+            parked=[0 <= parked_at[n] < steps for n in (i, j)],
+            goals_close=bool(np.linalg.norm(goal_arr[i] - goal_arr[j]) < tracker.touch),
+            activities=[activity.get(a), activity.get(b)],
+            holding=[policy.stats.holding.get(x) is not None for x in (a, b)])
+
     while env.agents:
         team = team_positions(env) if safety is not None else None
         actions, _ = policy.predict({a: obs[a] for a in env.agents}, positions=team)
@@ -193,7 +205,7 @@ def execute(
         steps += 1
         traj.append(env.positions)
         tracker.step(policy.stats.holding, infos, env.agents)
-        contacts.update(tally_step(infos, term, index, cost, reached, parked_at, steps, activity, split))
+        contacts.update(tally_step(infos, term, index, cost, reached, parked_at, steps, activity, split), why)
     plan = policy.current_plan
     extra: Dict[str, Any] = {}
     if plan is not None:
@@ -214,7 +226,7 @@ def execute(
             escapes=stats.leg_escapes, node_positions=node_positions)
     return Execution(bool(reached.all()), reached, cost, steps, contacts.count, policy.planning_time,
                      plan.status if plan is not None else "direct", trajectories, extra, failures, parked_at, split,
-                     contacts.touched)
+                     contacts.touched, contacts.reasons)
 
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_C_MAX", "DEFAULT_METHODS", "MARL_METHODS", "METHODS", "Method", "PAPER_METHODS",

@@ -501,6 +501,7 @@ def write_anatomy(rows, failures, out, title: str = "") -> str:
     (stacked bars); returns the Markdown table."""
     from agents.run_folder import atomic_output, write_atomic
     from baselines.anatomy import FAILURE_FIELDS, anatomy_figure, anatomy_table, failure_summary
+    from baselines.contact_anatomy import contact_summary, contact_table
     from baselines.evaluation import write_csv
     from baselines.output import write_rows_atomic
 
@@ -508,8 +509,13 @@ def write_anatomy(rows, failures, out, title: str = "") -> str:
     summary = failure_summary(rows)
     write_csv(summary, out / "anatomy.csv")
     table = anatomy_table(summary)
-    write_atomic(out / "anatomy.md", f"{title}: why agents did not arrive (failed agents per reason, share of the "
-                                     "cell's failed agents)\n\n" + table + "\n")
+    text = (f"{title}: why agents did not arrive (failed agents per reason, share of the cell's failed "
+            "agents)\n\n" + table + "\n")
+    contacts = contact_summary(rows)
+    if contacts:
+        text += (f"\n{title}: why agents touched (contacts between agents per reason, counted when they "
+                 "begin; baselines.contact_anatomy)\n\n" + contact_table(contacts) + "\n")
+    write_atomic(out / "anatomy.md", text)
     with atomic_output(out / "anatomy.png") as tmp:
         anatomy_figure(summary, tmp, title=title)
     return table

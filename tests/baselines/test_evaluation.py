@@ -386,7 +386,11 @@ def test_evaluate_command_writes_the_failure_anatomy_and_takes_hold_and_repairs(
     assert len(failures) == sum(2 - int(r["reached"]) for r in runs)  # one row per agent that did not arrive
     for r in failures:
         assert r["reason"] in ("never_planned", "deadlock", "out_of_time", "blocked_by_parked", "stuck_on_leg")
-    assert (tmp_path / "anatomy.md").read_text().count("| ours |") == 1
+    anatomy = (tmp_path / "anatomy.md").read_text()
+    failed, touched = anatomy.split("why agents touched")
+    assert failed.count("| ours |") == 1 and touched.count("| ours |") == 1  # one cell in each table
+    contacts = sum(int(r["collisions"]) for r in runs if r["method"] == "ours")
+    assert f"| ours | Hard | 2 | 1 | {contacts:.2f} |" in touched
     assert (tmp_path / "anatomy.png").exists() and (tmp_path / "edge_memory_ours.npz").exists()
     assert "--repair-problems 1 (seed 20000)" in (tmp_path / "table.md").read_text()
     assert main(["evaluate", "--repair-problems", "1", "--repair-seed", "0", "--out", str(tmp_path / "x")]) == 2

@@ -175,6 +175,9 @@ def test_the_harness_reports_contacts_and_the_safety_rate(stand_in_models, safet
     else:
         assert ex.collisions > 0 and ex.safety_rate == 0.0 and ex.touched.all()
         assert ex.extra["shield_steered"] == 0
+    assert sum(ex.contact_reasons.values()) == ex.collisions  # every contact has its reason
+    if not safety:  # the controller's yield did not keep them apart; then one drove into the other, parked
+        assert ex.contact_reasons == {"into_holding": 1, "parked": 1}
 
 
 def test_an_agent_the_layer_holds_for_long_counts_as_stuck(stand_in_models):
