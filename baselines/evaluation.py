@@ -602,18 +602,20 @@ def markdown_table(agg: Sequence[Dict[str, Any]], methods: Optional[Sequence[str
                 parts.append("n/a")
                 continue
             txt = (f"{v[f'{value}_mean']:.2f} ± {v[f'{value}_std']:.2f}" if math.isfinite(mu) else "-")
-            safe = v.get("safety_rate", math.nan)
-            shown = k > 1 and isinstance(safe, float) and math.isfinite(safe)
-            txt += f" ({100 * v['success_rate']:.0f}%" + (f"; safe {_percent(safe)})" if shown else ")")
+            txt += f" ({100 * v['success_rate']:.0f}%{safety_note(v)})"
             win = math.isfinite(mu) and mu == best and v["success_rate"] >= bold_min_success
             parts.append(f"**{txt}**" if win and len(methods) > 1 else txt)
         lines.append(f"| {d.capitalize()} | {k} | " + " | ".join(parts) + " |")
     return "\n".join(lines)
 
 
-def _percent(x: float) -> str:
-    """A share as a percentage with one decimal below 100 (``99.5%``) and none at 100."""
-    return "100%" if x >= 1.0 else f"{100 * x:.1f}%"
+def safety_note(cell: Dict[str, Any]) -> str:
+    """``"; safe 99.5%"``: an aggregated multi-agent cell's safety rate as a table shows it beside the
+    success rate (one decimal below 100%, none at 100%); empty for one agent or where not recorded."""
+    safe = cell.get("safety_rate", math.nan)
+    if cell.get("agents", 1) <= 1 or not isinstance(safe, float) or not math.isfinite(safe):
+        return ""
+    return "; safe " + ("100%" if safe >= 1.0 else f"{100 * safe:.1f}%")
 
 
 def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
@@ -627,4 +629,4 @@ def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
 
 __all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "REPAIR_SEED_OFFSET",
            "ROW_FIELDS", "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "learn_edge_memory",
-           "make_problems", "mapf_metrics", "markdown_table", "select_c_max", "write_csv"]
+           "make_problems", "mapf_metrics", "markdown_table", "safety_note", "select_c_max", "write_csv"]

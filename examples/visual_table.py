@@ -32,16 +32,17 @@ import json
 import math
 from pathlib import Path
 
-from baselines.evaluation import aggregate
+from baselines.evaluation import aggregate, safety_note
 from baselines.output import read_rows
 from baselines.paper_protocol import choose_best_c_max
 from baselines.paper_tables import TABLE2, TABLE2_METHODS, TABLE2_SCENES
 
 
-def fmt(mean, std, rate) -> str:
+def fmt(mean, std, rate, note: str = "") -> str:
+    """``mean ± std (success%)``, with ``note`` (the safety rate) inside the brackets."""
     if mean is None or (isinstance(mean, float) and math.isnan(mean)):
-        return f"- ({100 * rate:.0f}%)" if rate is not None else "n/a"
-    return f"{mean:.2f} ± {std:.2f} ({100 * rate:.0f}%)"
+        return f"- ({100 * rate:.0f}%{note})" if rate is not None else "n/a"
+    return f"{mean:.2f} ± {std:.2f} ({100 * rate:.0f}%{note})"
 
 
 def main() -> None:
@@ -73,7 +74,7 @@ def main() -> None:
             parts = [env_id, scene, d.capitalize(), str(k)]
             for m in args.methods:
                 r = cell.get((d, k, m))
-                txt = fmt(r["cost_mean"], r["cost_std"], r["success_rate"]) if r else "n/a"
+                txt = fmt(r["cost_mean"], r["cost_std"], r["success_rate"], safety_note(r)) if r else "n/a"
                 if r and r.get("cost_median") is not None and not math.isnan(r["cost_median"]):
                     txt += f", median {r['cost_median']:.2f}"
                 parts.append(txt)
