@@ -4,7 +4,8 @@ Reads folders of ``safe-mapf evaluate`` (with the safety layer, and with ``--saf
 same problems; several of each pool their runs, e.g. two seeds) and prints a Markdown table: CSR
 (runs in which every agent arrived), ISR (agents that arrived), the mean largest cumulative cost
 over all runs, contacts per run, the safety rate (agents that never touched another) and the
-makespan.
+makespan; then why the agents touched, per agent count and layer
+(:mod:`baselines.contact_anatomy`, from the rows' ``contact_reasons``).
 
 Run: ``python examples/safety_table.py --on results/on_s1 results/on_s2 --off results/off_s1 results/off_s2``
 """
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from baselines.contact_anatomy import CONTACT_REASONS, contact_summary
 from baselines.output import read_rows
 
 
@@ -44,6 +46,15 @@ def main(argv=None) -> None:
                   f"{np.mean([r['isr'] for r in rs]):.1%} | {np.mean([r['cost_max'] for r in rs]):.2f} | "
                   f"{np.mean([r['collisions'] for r in rs]):.1f} | {rate} | "
                   f"{np.mean([r['makespan'] for r in rs]):.0f} |")
+    pooled = [{**r, "method": name, "difficulty": "all"} for name, runs in rows.items() for r in runs]
+    summary = sorted(contact_summary(pooled), key=lambda c: (c["agents"], c["method"] == "off"))
+    if summary:  # runs of an earlier release did not record the reasons
+        print("\nWhy agents touched: contacts per reason over the runs that recorded them\n")
+        print("| agents | layer | runs | contacts per run | " + " | ".join(CONTACT_REASONS) + " |")
+        print("|---|---|---|---|" + "---|" * len(CONTACT_REASONS))
+        for c in summary:
+            print(f"| {c['agents']} | {c['method']} | {c['runs']} | {c['contacts'] / c['runs']:.1f} | "
+                  + " | ".join(str(c[k]) for k in CONTACT_REASONS) + " |")
 
 
 if __name__ == "__main__":

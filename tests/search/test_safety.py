@@ -213,8 +213,11 @@ def test_the_safety_table_reads_the_shipped_runs(run_example):
     off = sorted(str(p) for p in Path("examples/safety").glob("*_off"))
     code, out = run_example("safety_table.py", "--on", *on, "--off", *off)
     assert code in (None, 0)
-    rows = [r.split("|") for r in out.out.splitlines() if r.startswith("| 100 | ")]
+    table, why_table = out.out.split("Why agents touched")
+    rows = [r.split("|") for r in table.splitlines() if r.startswith("| 100 | ")]
     (layer,), (bare,) = [[r for r in rows if r[2].strip() == name] for name in ("on", "off")]
     assert layer[7].strip() == "100.0%" and float(bare[6]) > 0  # safety rate with it, contacts without
+    why = [r.split("|") for r in why_table.splitlines() if r.startswith("| 100 | off |")]
+    assert len(why) == 1 and sum(int(x) for x in why[0][5:10]) > 0  # the seed-101 runs recorded the reasons
     code, out = run_example("safety_table.py", "--on", "no/such/folder", "--off", *off)
     assert "no/such/folder/runs.csv" in str(code)
