@@ -64,9 +64,14 @@ def markdown(name: str, rows: List[Dict[str, Any]]) -> str:
         k = a["agents"]
         lines.append(f"| {k} | {a['runs']} | {100 * a['csr']:.0f}% | {100 * a['isr']:.1f}% | "
                      f"{a['soc_mean'] / k:.1f} | {a['makespan_mean']:.0f} | {a['cost_all_mean']:.1f} | "
-                     f"{a['contacts_all_mean']:.1f} | {100 * a['safety_rate_all_mean']:.1f}% | "
+                     f"{a['contacts_all_mean']:.1f} | {_share(a['safety_rate_all_mean'])} | "
                      f"{a['planning_time_median']:.2f} s |")
     return "\n".join(lines)
+
+
+def _share(x: float) -> str:
+    """A share as a percentage; ``n/a`` for rows that did not record it."""
+    return "n/a" if math.isnan(x) else f"{100 * x:.1f}%"
 
 
 def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
