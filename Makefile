@@ -18,7 +18,7 @@ $(BIN)/python:
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/pip install --upgrade pip
 	$(BIN)/pip install "$(TORCH_SPEC)" $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
-	$(BIN)/pip install -e ".[test,ray,marl,docs]"
+	$(BIN)/pip install -e ".[test,ray,marl,docs,fast]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -53,7 +53,9 @@ class Proximity:
                 raise ValueError(f"proximity node_dist must have shape ({n_nodes}, {n_nodes}), got {d.shape}")
         if np.isnan(d).any():
             raise ValueError("proximity node_dist contains NaN")
-        near = (d < self.radius) | (d.T < self.radius)
+        near = d < self.radius
+        rows, cols = np.nonzero(near)
+        near[cols, rows] = True  # either direction (few pairs: no pass over the transposed matrix)
         np.fill_diagonal(near, False)
         return near
 
@@ -261,7 +263,10 @@ class MapfInstance:
         if self.proximity is not None:
             near = self.proximity.near_matrix(n)
             self.near_mat: Optional[np.ndarray] = near
-            self.near: Optional[List[List[int]]] = [np.nonzero(near[u])[0].tolist() for u in range(n)]
+            rows_near, cols_near = np.nonzero(near)  # row by row, columns ascending
+            cut = np.searchsorted(rows_near, np.arange(n + 1)).tolist()
+            flat_near = cols_near.tolist()
+            self.near: Optional[List[List[int]]] = [flat_near[cut[u]:cut[u + 1]] for u in range(n)]
             if not any(self.near):
                 self.near = None  # nothing is ever near: plain vertex semantics
         else:

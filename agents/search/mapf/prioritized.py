@@ -31,11 +31,12 @@ from typing import Dict, List, Optional, Sequence, Set, Tuple
 import numpy as np
 from scipy.sparse.csgraph import breadth_first_order
 
+from . import compiled
 from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
-from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
+from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, out_arrays, sipp
 from .solver import DEFAULT_JOINT_CHECK_STATES
 
 #: default SIPP expansions of one solve, over all agents and restarts
@@ -128,6 +129,18 @@ def _blocks_start(inst: MapfInstance, goal: int, start: int) -> bool:
     return goal == start or (near is not None and bool(near[goal, start]))
 
 
+def start_blockers(inst: MapfInstance) -> List[List[int]]:
+    """Per agent ``i``, the other agents ``j`` (ascending) whose start an agent parked at ``i``'s
+    goal would block (:func:`_blocks_start`), from the near lists rather than all pairs."""
+    at: Dict[int, int] = {s: j for j, s in enumerate(inst.starts)}
+    near = inst.near
+    out: List[List[int]] = []
+    for i, g in enumerate(inst.goals):
+        nodes = [g] + (near[g] if near is not None else [])
+        out.append(sorted(j for j in (at.get(x) for x in nodes) if j is not None and j != i))
+    return out
+
+
 def initial_order(inst: MapfInstance) -> List[int]:
     """Far agents first (decreasing distance to the goal, ties by index: a long path is the
     hardest to fit among others), except that an agent whose goal is at or near another
@@ -139,11 +152,10 @@ def initial_order(inst: MapfInstance) -> List[int]:
     pos = {a: r for r, a in enumerate(rank)}
     after: List[List[int]] = [[] for _ in range(k)]
     waiting = [0] * k
-    for i in range(k):
-        for j in range(k):
-            if i != j and _blocks_start(inst, inst.goals[i], inst.starts[j]):
-                after[j].append(i)  # i parks where j waits: j goes first
-                waiting[i] += 1
+    for i, blocked in enumerate(start_blockers(inst)):
+        for j in blocked:
+            after[j].append(i)  # i parks where j waits: j goes first
+            waiting[i] += 1
     ready = [(pos[i], i) for i in range(k) if not waiting[i]]
     heapq.heapify(ready)
     order: List[int] = []
@@ -181,6 +193,7 @@ def release_order(inst: MapfInstance) -> List[int]:
     for a in range(k):
         cover[reach[a]] += 1
     edges = inst.durations.tocsr()
+    fast = out_arrays(inst) if compiled.active() else None  # the same test, compiled
     left = set(range(k))
     order: List[int] = []
     while left:
@@ -192,6 +205,10 @@ def release_order(inst: MapfInstance) -> List[int]:
             g = goals[a]
             if not (open_[g] and open_[starts[a]]):
                 continue  # the goal or the start is at or near the start of an agent still waiting
+            if fast is not None:
+                if compiled.reaches(fast[0], fast[1], open_, starts[a], g):
+                    ready.append(a)
+                continue
             idx = np.flatnonzero(open_)
             sub = np.full(n, -1, dtype=np.int64)
             sub[idx] = np.arange(len(idx))
@@ -241,6 +258,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         if soft is not None:
             soft.hold(i, inst.starts[i], FOREVER)
     unplanned = set(order)
+    blockers = start_blockers(inst)
     queue = collections.deque(order)
     deferred: Dict[int, int] = {}  # agent -> times put back
     while queue:
@@ -249,7 +267,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
         i = queue.popleft()
         table.release(i)
         unplanned.discard(i)
-        shortened = [j for j in unplanned if _blocks_start(inst, inst.goals[i], inst.starts[j])]
+        shortened = [j for j in blockers[i] if j in unplanned]
         for j in shortened:
             table.release(j)
             table.hold(j, inst.starts[j], start_hold)

@@ -26,6 +26,9 @@ import heapq
 from bisect import bisect_right
 from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar
 
+import numpy as np
+
+from . import compiled
 from .instance import UNREACHABLE, MapfInstance
 
 #: What a :class:`NodeRanges` caches per node.
@@ -67,19 +70,27 @@ class NodeRanges(Generic[C]):
             tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
         #: per node, its moves ``(v, duration)`` (waiting left out)
         self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
+        #: the nodes whose ranges changed since a subclass last read them (``None``: not tracked)
+        self._dirty: Optional[Set[int]] = None
 
     def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
         self._touched.setdefault((agent, hold), set()).add(node)
         entry = (first, last, agent, hold)
+        dirty = self._dirty
         for x in self._reach[node]:
             self._ranges[x].append(entry)
             self._cache[x] = None
+            if dirty is not None:
+                dirty.add(x)
 
     def _drop(self, agent: int, hold: bool) -> None:
+        dirty = self._dirty
         for node in self._touched.pop((agent, hold), ()):
             for x in self._reach[node]:
                 self._ranges[x] = [e for e in self._ranges[x] if e[2] != agent or e[3] != hold]
                 self._cache[x] = None
+                if dirty is not None:
+                    dirty.add(x)
 
     def hold(self, agent: int, node: int, last: int) -> None:
         """Keep ``node`` (and the nodes near it) for ``agent`` during ``0 .. last`` until
@@ -107,6 +118,8 @@ class IntervalTable(NodeRanges[List[Tuple[int, int]]]):
         self._starts: List[Optional[List[int]]] = [None] * n
         #: unit time: reserved moves ``(u, v, t)`` (leaving ``u`` at ``t``), for swap checks
         self.moves: Set[Tuple[int, int, int]] = set()
+        #: the safe intervals as arrays, for the compiled search (made on first use, see :meth:`arrays`)
+        self._arrays: Optional[_SearchArrays] = None
 
     def holders(self, node: int) -> Set[int]:
         """The agents not planned yet whose held start blocks ``node``."""
@@ -146,6 +159,109 @@ class IntervalTable(NodeRanges[List[Tuple[int, int]]]):
             self._starts[node] = [a for a, _ in s]
         return s
 
+    def arrays(self) -> "_SearchArrays":
+        """The safe intervals of every node as arrays (brought up to date), with the compiled
+        search's scratch space."""
+        arr = self._arrays
+        if arr is None:
+            arr = self._arrays = _SearchArrays(self.inst.n_nodes)
+            self._dirty = set(range(self.inst.n_nodes))
+        dirty = self._dirty
+        assert dirty is not None
+        if dirty:
+            safe = self.safe
+            for x in dirty:
+                s = safe(x)
+                m = len(s)
+                if m > arr.cap:
+                    arr.grow(m)
+                arr.lo[x, :m] = [a for a, _ in s]
+                arr.hi[x, :m] = [b for _, b in s]
+                arr.n[x] = m
+            dirty.clear()
+        return arr
+
+
+class _SearchArrays:
+    """Safe intervals per node (``lo[v, j]``, ``hi[v, j]`` for ``j < n[v]``) and the scratch space
+    of one compiled safe-interval search over ``(node, interval)`` codes (``j * N + v``)."""
+
+    def __init__(self, n_nodes: int, cap: int = 4) -> None:
+        self.n_nodes = n_nodes
+        self.cap = 0
+        self.lo = np.zeros((n_nodes, 0), dtype=np.int64)
+        self.hi = np.zeros((n_nodes, 0), dtype=np.int64)
+        self.n = np.zeros(n_nodes, dtype=np.int64)
+        self.expl = np.zeros(n_nodes, dtype=np.uint8)
+        self.grow(cap)
+
+    def grow(self, need: int) -> None:
+        """Room for at least ``need`` intervals per node."""
+        cap = max(need, 2 * self.cap)
+        lo = np.zeros((self.n_nodes, cap), dtype=np.int64)
+        hi = np.zeros((self.n_nodes, cap), dtype=np.int64)
+        lo[:, :self.cap] = self.lo
+        hi[:, :self.cap] = self.hi
+        self.lo, self.hi, self.cap = lo, hi, cap
+        size = self.n_nodes * cap
+        self.best = np.full(size, FOREVER, dtype=np.int64)
+        self.par_code = np.zeros(size, dtype=np.int64)
+        self.par_t = np.zeros(size, dtype=np.int64)
+        self.touched = np.zeros(size, dtype=np.int64)
+
+
+def out_arrays(inst: MapfInstance) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The instance's moves (waiting left out) as CSR arrays ``(indptr, targets, durations)``,
+    in the order of ``inst.succ_d`` (made once per instance)."""
+    got = getattr(inst, "_out_arrays", None)
+    if got is None:
+        rows = [row[1:] for row in inst.succ_d]
+        indptr = np.zeros(len(rows) + 1, dtype=np.int64)
+        np.cumsum([len(r) for r in rows], out=indptr[1:])
+        flat = [e for r in rows for e in r]
+        targets = np.array([v for v, _ in flat], dtype=np.int64)
+        durs = np.array([d for _, d in flat], dtype=np.int64)
+        got = (indptr, targets, durs)
+        inst._out_arrays = got  # type: ignore[attr-defined]
+    return got
+
+
+def _sipp_compiled(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int],
+                   count: List[int], explored: Optional[Set[int]]) -> Optional[Events]:
+    """:func:`sipp` under the durative time model by the compiled loop (the same path, the same
+    expansions)."""
+    arr = table.arrays()
+    indptr, targets, durs = out_arrays(inst)
+    h = inst._h_array[agent]
+    arr.expl.fill(0)
+    status, code, done, nt = compiled.sipp_durative(
+        inst.starts[agent], inst.goals[agent], h, indptr, targets, durs, arr.lo, arr.hi, arr.n, arr.best,
+        arr.par_code, arr.par_t, arr.touched, arr.expl, count[0], -1 if budget is None else int(budget),
+        FOREVER, UNREACHABLE)
+    count[0] = int(done)
+    try:
+        if explored is not None:
+            explored.update(np.flatnonzero(arr.expl).tolist())
+        if status == compiled.OVER_BUDGET:
+            raise BudgetExceeded
+        if status != compiled.FOUND:
+            return None
+        N = inst.n_nodes
+        best, par_code, par_t = arr.best, arr.par_code, arr.par_t
+        code = int(code)
+        out: Events = [(code % N, int(best[code]))]
+        while par_code[code] >= 0:
+            prev, t_dep = int(par_code[code]), int(par_t[code])
+            t_prev = int(best[prev])
+            if t_dep > t_prev:
+                out.append((prev % N, t_dep))
+            out.append((prev % N, t_prev))
+            code = prev
+        out.reverse()
+        return out
+    finally:
+        arr.best[arr.touched[:nt]] = FOREVER
+
 
 class BudgetExceeded(Exception):
     """Raised by :func:`sipp` when its expansion budget runs out."""
@@ -160,6 +276,10 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     exceeds ``budget`` the search raises :class:`BudgetExceeded`. ``explored`` (optional)
     collects the nodes the search expanded (where a search that fails was confined). The path is optimal: it
     arrives at the goal no later than any other path that avoids the table and parks there.
+
+    Under the durative time model, where numba is installed, the search runs as a compiled loop
+    (:mod:`~agents.search.mapf.compiled`) over the table's intervals as arrays: the same states in
+    the same order, so the same path and the same expansions.
     """
     s, g = inst.starts[agent], inst.goals[agent]
     h = inst.h[agent]
@@ -176,6 +296,8 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     if not s_int or s_int[0][0] != 0:
         return None  # the start is blocked at time 0
     count = counter if counter is not None else [0]
+    if not unit and compiled.active():
+        return _sipp_compiled(inst, agent, table, budget, count, explored)
     push, pop = heapq.heappush, heapq.heappop
     # a state (node v, its j-th safe interval) is coded j * N + v; best arrival and parent per code
     best: Dict[int, int] = {s: 0}

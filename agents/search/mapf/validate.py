@@ -9,6 +9,7 @@ goals), like the solver.
 """
 from __future__ import annotations
 
+from bisect import bisect_right
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -151,66 +152,113 @@ def validate(
     return problems
 
 
-def _timelines(events: List[Tuple[int, int]], horizon: int, unit: bool) -> List[Tuple[int, ...]]:
-    """Occupied nodes at every time 0..horizon (unit) / during every step [k, k+1) (durative).
+def _occupied_at(events: List[Tuple[int, int]], times: List[int], t: int, unit: bool) -> Tuple[int, ...]:
+    """The nodes an agent following ``events`` occupies at time ``t`` (unit) / during step
+    ``[t, t + 1)`` (durative): the node it is at or waits at, or both ends of the edge it is
+    traversing; from its final arrival on, its goal."""
+    i = bisect_right(times, t) - 1
+    if i >= len(events) - 1:
+        return (events[-1][0],)
+    u, v = events[i][0], events[i + 1][0]
+    return (u,) if (unit or u == v) else (u, v)
 
-    Unit time: the node the agent is at. Durative: the node it waits at, or both ends of the
-    edge it is traversing. From its final arrival on an agent occupies its goal.
-    """
-    out: List[Tuple[int, ...]] = []
+
+def _spans(events: List[Tuple[int, int]], horizon: int, unit: bool) -> List[Tuple[int, int, int]]:
+    """``(node, first, last)``: the inclusive ranges of times (unit) / steps (durative) in which
+    an agent following ``events`` occupies each node, up to ``horizon`` (then parked at its goal)."""
+    out: List[Tuple[int, int, int]] = []
     for (u, t0), (v, t1) in zip(events, events[1:]):
-        occ = (u,) if (unit or u == v) else (u, v)
-        out.extend([occ] * (t1 - t0))
-    last = (events[-1][0],)
-    while len(out) <= horizon:
-        out.append(last)
+        out.append((u, t0, t1 - 1))
+        if not unit and u != v:
+            out.append((v, t0, t1 - 1))
+    out.append((events[-1][0], events[-1][1], horizon))
     return out
 
 
 def _conflicts(ok: Dict[int, List[Tuple[int, int]]], unit: bool, near: Optional[np.ndarray]) -> List[str]:
+    """Every conflict between two agents, ordered by the pair, then by time.
+
+    The times at which two agents may conflict are found from the ranges in which they occupy
+    each node (the same node, or two near nodes, in overlapping ranges; unit time: opposite moves
+    at the same time); each is then checked from both agents' occupation at that time."""
     agents = sorted(ok)
     arrive = {k: ok[k][-1][1] for k in agents}
     horizon = max(arrive.values()) + 1
-    occ = {k: _timelines(ok[k], horizon, unit) for k in agents}
+    at_node: Dict[int, List[Tuple[int, int, int]]] = {}
+    for k in agents:
+        for node, first, last in _spans(ok[k], horizon, unit):
+            at_node.setdefault(node, []).append((first, last, k))
+    candidates = set()
+
+    def overlaps(xs: List[Tuple[int, int, int]], ys: List[Tuple[int, int, int]], same: bool) -> None:
+        for i, (f1, l1, a) in enumerate(xs):
+            for f2, l2, b in (xs[i + 1:] if same else ys):
+                if a == b:
+                    continue
+                lo, hi = max(f1, f2), min(l1, l2)
+                if lo <= hi:
+                    pair = (a, b) if a < b else (b, a)
+                    for t in range(lo, hi + 1):
+                        candidates.add((pair[0], pair[1], t))
+
+    for node, xs in at_node.items():
+        overlaps(xs, xs, True)
+        if near is not None:
+            for other in np.flatnonzero(near[node]).tolist():
+                if other > node and other in at_node:
+                    overlaps(xs, at_node[other], False)
+    if unit:
+        moves: Dict[Tuple[int, int, int], List[int]] = {}
+        for k in agents:
+            for (u, t0), (v, _) in zip(ok[k], ok[k][1:]):
+                if u != v:
+                    moves.setdefault((u, v, t0), []).append(k)
+        for (u, v, t), movers in moves.items():
+            for b in moves.get((v, u, t), ()):
+                for a in movers:
+                    if a < b:
+                        candidates.add((a, b, t))
+    times = {k: [t for _, t in ok[k]] for k in agents}
     problems: List[str] = []
-    for ia, a in enumerate(agents):
-        for b in agents[ia + 1:]:
-            oa, ob = occ[a], occ[b]
-            for t in range(horizon + 1):
-                sa, sb = oa[t], ob[t]
-                parked = [x for x in (a, b) if t >= arrive[x]]
-                where = "at" if unit else "during step"
-                tag = f"t={t}" if unit else f"[{t}, {t + 1})"
-                hit = None
-                for x in sa:
-                    if x in sb:
-                        hit = ("vertex", x, x)
+    where = "at" if unit else "during step"
+    for a, b, t in sorted(candidates):
+        if t > horizon:
+            continue
+        ea, eb = ok[a], ok[b]
+        sa, sb = _occupied_at(ea, times[a], t, unit), _occupied_at(eb, times[b], t, unit)
+        parked = [x for x in (a, b) if t >= arrive[x]]
+        tag = f"t={t}" if unit else f"[{t}, {t + 1})"
+        hit = None
+        for x in sa:
+            if x in sb:
+                hit = ("vertex", x, x)
+                break
+        if hit is None and near is not None:
+            for x in sa:
+                for y in sb:
+                    if x != y and near[x, y]:
+                        hit = ("proximity", x, y)
                         break
-                if hit is None and near is not None:
-                    for x in sa:
-                        for y in sb:
-                            if x != y and near[x, y]:
-                                hit = ("proximity", x, y)
-                                break
-                        if hit:
-                            break
-                if hit is not None:
-                    kind, x, y = hit
-                    if len(parked) == 1:
-                        p = parked[0]
-                        q, goal_p, node_q = (b, x, y) if p == a else (a, y, x)
-                        extra = "" if kind == "vertex" else " (within the proximity radius)"
-                        problems.append(
-                            f"target conflict: agent {q} {where} node {node_q} {tag} while agent {p} is parked "
-                            f"at its goal {goal_p} since t={arrive[p]}{extra}")
-                    elif kind == "vertex":
-                        problems.append(f"vertex conflict: agents {a} and {b} {where} node {x} {tag}")
-                    else:
-                        problems.append(f"proximity conflict: agent {a} {where} node {x} and agent {b} "
-                                        f"{where} node {y} {tag} are closer than the radius")
-                if unit and t < horizon:
-                    na, nb = oa[t + 1][0], ob[t + 1][0]
-                    if sa[0] != na and sa[0] == nb and na == sb[0]:
-                        problems.append(f"swap conflict: agents {a} ({sa[0]}->{na}) and {b} ({sb[0]}->{nb}) "
-                                        f"traverse the same edge in opposite directions at t={t}")
+                if hit:
+                    break
+        if hit is not None:
+            kind, x, y = hit
+            if len(parked) == 1:
+                p = parked[0]
+                q, goal_p, node_q = (b, x, y) if p == a else (a, y, x)
+                extra = "" if kind == "vertex" else " (within the proximity radius)"
+                problems.append(
+                    f"target conflict: agent {q} {where} node {node_q} {tag} while agent {p} is parked "
+                    f"at its goal {goal_p} since t={arrive[p]}{extra}")
+            elif kind == "vertex":
+                problems.append(f"vertex conflict: agents {a} and {b} {where} node {x} {tag}")
+            else:
+                problems.append(f"proximity conflict: agent {a} {where} node {x} and agent {b} "
+                                f"{where} node {y} {tag} are closer than the radius")
+        if unit and t < horizon:
+            na = _occupied_at(ea, times[a], t + 1, unit)[0]
+            nb = _occupied_at(eb, times[b], t + 1, unit)[0]
+            if sa[0] != na and sa[0] == nb and na == sb[0]:
+                problems.append(f"swap conflict: agents {a} ({sa[0]}->{na}) and {b} ({sb[0]}->{nb}) "
+                                f"traverse the same edge in opposite directions at t={t}")
     return problems

@@ -1,0 +1,229 @@
+"""What makes a thousand agents on a large buffer graph fast: the array form of the safe-interval
+search (compiled where numba is installed), the validator's conflict search by occupied ranges,
+and the start blockers from the near lists. Each must give what the plain form gives."""
+import random
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+import pytest
+
+from agents.search.mapf import MapfInstance, Proximity, compiled, solve_prioritized, validate
+from agents.search.mapf import sipp as sipp_module
+from agents.search.mapf.prioritized import _blocks_start, start_blockers
+from agents.search.mapf.validate import _conflicts
+
+
+def grid_instance(side: int, k: int, seed: int, radius: float = 1.5, durative: bool = True) -> MapfInstance:
+    """A ``side`` x ``side`` 4-connected grid with random symmetric durations 1..3, ``k`` agents
+    on random distinct starts and goals, proximity by Manhattan distance below ``radius``."""
+    rng = random.Random(seed)
+    n = side * side
+    dur: Dict[Tuple[int, int], int] = {}
+    for r in range(side):
+        for c in range(side):
+            u = r * side + c
+            for dr, dc in ((0, 1), (1, 0)):
+                if r + dr < side and c + dc < side:
+                    v = (r + dr) * side + c + dc
+                    dur[(u, v)] = dur[(v, u)] = rng.randint(1, 3)
+    adj = [[(v, d) for (a, v), d in sorted(dur.items()) if a == u] for u in range(n)]
+    xy = np.array([(u // side, u % side) for u in range(n)])
+    manhattan = np.abs(xy[:, None, :] - xy[None, :, :]).sum(-1).astype(float)
+    nodes = list(range(n))
+    for _ in range(1000):  # starts (and goals) not near each other
+        starts = rng.sample(nodes, k)
+        goals = rng.sample(nodes, k)
+        if all(manhattan[a, b] >= radius for ends in (starts, goals) for a in ends for b in ends if a != b):
+            break
+    return MapfInstance(adj, starts, goals, time_model="durative" if durative else "unit",
+                        proximity=Proximity(manhattan, radius))
+
+
+@pytest.fixture
+def array_search(monkeypatch):
+    """The safe-interval search in its array form (the compiled loop where numba is installed, its
+    Python twin otherwise)."""
+    if not compiled.AVAILABLE:
+        monkeypatch.setattr(compiled, "AVAILABLE", True)
+        monkeypatch.setattr(compiled, "sipp_durative", compiled._sipp_durative_py)
+    monkeypatch.setattr(compiled, "ENABLED", True)
+
+
+def solve_both(inst: MapfInstance, monkeypatch, **kwargs):
+    monkeypatch.setattr(compiled, "ENABLED", False)
+    plain = solve_prioritized(inst, **kwargs)
+    monkeypatch.setattr(compiled, "ENABLED", True)
+    fast = solve_prioritized(inst, **kwargs)
+    return plain, fast
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("k", [8, 12])  # solved, and given up (prioritised planning is incomplete)
+def test_the_array_search_plans_what_the_plain_one_plans(array_search, monkeypatch, seed, k):
+    inst = grid_instance(8, k, seed)
+    plain, fast = solve_both(inst, monkeypatch)
+    assert plain.status == fast.status and plain.message == fast.message
+    assert fast.paths == plain.paths and fast.soc == plain.soc
+    assert fast.stats.ll_expanded == plain.stats.ll_expanded  # the same work, counted the same
+    if fast.solved:
+        assert validate(inst, None, None, fast.paths) == []
+
+
+def test_the_array_search_spends_the_same_budget(array_search, monkeypatch):
+    inst = grid_instance(8, 8, 1)
+    free = solve_prioritized(inst)
+    assert free.solved and free.stats.ll_expanded > 100
+    limit = free.stats.ll_expanded // 2
+    plain, fast = solve_both(inst, monkeypatch, expansion_limit=limit)
+    assert plain.status == fast.status == "timeout"
+    assert "expansion limit" in fast.message
+    assert fast.stats.ll_expanded == plain.stats.ll_expanded == limit + 1
+
+
+def test_the_array_search_keeps_holds_and_releases(array_search):
+    # a table whose intervals change between searches: the arrays follow every change
+    inst = grid_instance(5, 3, 0)
+    table = sipp_module.IntervalTable(inst)
+    table.hold(1, inst.starts[1], sipp_module.FOREVER)
+    first = sipp_module.sipp(inst, 0, table)
+    table.release(1)
+    table.reserve(1, [(inst.starts[1], 0)])
+    again = sipp_module.sipp(inst, 0, table)
+    compiled.ENABLED = False
+    table2 = sipp_module.IntervalTable(inst)
+    table2.hold(1, inst.starts[1], sipp_module.FOREVER)
+    assert sipp_module.sipp(inst, 0, table2) == first
+    table2.release(1)
+    table2.reserve(1, [(inst.starts[1], 0)])
+    assert sipp_module.sipp(inst, 0, table2) == again
+
+
+def test_unit_time_keeps_the_plain_search(array_search, monkeypatch):
+    inst = grid_instance(6, 8, 1, durative=False)
+    plain, fast = solve_both(inst, monkeypatch)
+    assert fast.paths == plain.paths and fast.status == plain.status
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba is not installed")
+def test_the_compiled_loop_is_the_python_one():
+    assert compiled.sipp_durative is not compiled._sipp_durative_py
+    assert compiled.sipp_durative.py_func is compiled._sipp_durative_py
+
+
+def test_start_blockers_are_the_pairs_that_block():
+    for seed in range(4):
+        inst = grid_instance(6, 10, seed, radius=2.5)
+        got = start_blockers(inst)
+        for i in range(inst.n_agents):
+            want = [j for j in range(inst.n_agents) if j != i and _blocks_start(inst, inst.goals[i], inst.starts[j])]
+            assert got[i] == want
+
+
+# ------------------------------------------------------------------------------------------------
+# the validator's conflicts against every pair at every time
+# ------------------------------------------------------------------------------------------------
+def _timeline(events: List[Tuple[int, int]], horizon: int, unit: bool) -> List[Tuple[int, ...]]:
+    out: List[Tuple[int, ...]] = []
+    for (u, t0), (v, t1) in zip(events, events[1:]):
+        occ = (u,) if (unit or u == v) else (u, v)
+        out.extend([occ] * (t1 - t0))
+    while len(out) <= horizon:
+        out.append((events[-1][0],))
+    return out
+
+
+def conflicts_pair_by_pair(ok: Dict[int, List[Tuple[int, int]]], unit: bool,
+                           near: Optional[np.ndarray]) -> List[Tuple[int, int, int, str]]:
+    """``(a, b, t, kind)`` of every conflict, checking every pair of agents at every time."""
+    agents = sorted(ok)
+    horizon = max(ev[-1][1] for ev in ok.values()) + 1
+    occ = {k: _timeline(ok[k], horizon, unit) for k in agents}
+    found = []
+    for ia, a in enumerate(agents):
+        for b in agents[ia + 1:]:
+            for t in range(horizon + 1):
+                sa, sb = occ[a][t], occ[b][t]
+                if any(x in sb for x in sa):
+                    found.append((a, b, t, "vertex"))
+                elif near is not None and any(x != y and near[x, y] for x in sa for y in sb):
+                    found.append((a, b, t, "proximity"))
+                if unit and t < horizon:
+                    na, nb = occ[a][t + 1][0], occ[b][t + 1][0]
+                    if sa[0] != na and sa[0] == nb and na == sb[0]:
+                        found.append((a, b, t, "swap"))
+    return found
+
+
+@pytest.mark.parametrize("unit", [False, True])
+def test_the_validator_finds_every_conflict_pair_by_pair_finds(unit):
+    rng = random.Random(7)
+    seen_conflicts = 0
+    for trial in range(150):
+        inst = grid_instance(4, 4, trial, durative=not unit)
+        near = inst.near_mat
+        ok: Dict[int, List[Tuple[int, int]]] = {}
+        for a in range(inst.n_agents):  # random walks, waits included
+            u, t = inst.starts[a], 0
+            events = [(u, 0)]
+            for _ in range(rng.randint(0, 6)):
+                if rng.random() < 0.3:
+                    t += rng.randint(1, 2)
+                    events.append((u, t))
+                else:
+                    v, d = rng.choice(inst.succ_d[u][1:])
+                    t += 1 if unit else d
+                    events.append((v, t))
+                    u = v
+            ok[a] = events
+        want = conflicts_pair_by_pair(ok, unit, near)
+        got = _conflicts(ok, unit, near)
+        seen_conflicts += bool(want)
+        assert len(got) == len(want)
+        for (a, b, t, kind), message in zip(want, got):
+            assert str(a) in message and str(b) in message and (f"t={t}" in message or f"[{t}, {t + 1})" in message)
+            if kind == "swap":
+                assert message.startswith("swap conflict")
+            elif kind == "vertex":
+                assert "vertex" in message or ("target" in message and "proximity radius" not in message)
+            else:
+                assert "proximity" in message
+    assert seen_conflicts > 20  # the walks do collide
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_release_order_is_the_same_either_way(array_search, monkeypatch, seed):
+    from agents.search.mapf.prioritized import release_order
+
+    inst = grid_instance(7, 14, seed, radius=2.5)
+    fast = release_order(inst)
+    monkeypatch.setattr(compiled, "ENABLED", False)
+    assert release_order(inst) == fast
+
+
+@pytest.mark.parametrize("nodes", [400, 1500])
+def test_the_prioritized_budget_grows_with_the_graph(monkeypatch, nodes):
+    import agents.search.planner as planner_module
+    from agents.search.planner import REFERENCE_BUFFER_NODES, BufferPlanner
+
+    rng = np.random.default_rng(0)
+    side = np.sqrt(nodes) * 1.5
+    obs = rng.uniform(0, side, size=(nodes, 2))
+
+    def pairwise(a, b):
+        d = np.linalg.norm(a[:, None] - b[None], axis=-1)
+        return d, np.zeros_like(d)
+
+    D, C = pairwise(obs, obs)
+    planner = BufferPlanner(obs, D, C, pairwise, solver="prioritized", prioritized_expansions_per_agent=100)
+    assert planner.size_scale() == max(1.0, nodes / REFERENCE_BUFFER_NODES)
+    seen = {}
+
+    def spy(inst, expansion_limit=None, **kwargs):
+        seen["limit"] = expansion_limit
+        return planner_module.CBSResult("timeout", message="spied")
+
+    monkeypatch.setattr(planner_module, "solve_prioritized", spy)
+    k = 3
+    picks = rng.choice(nodes, size=2 * k, replace=False)
+    planner.plan(obs[picks[:k]] + 0.1, obs[picks[k:]] + 0.1)
+    assert seen["limit"] == int(100 * k * planner.size_scale())  # (a sparse graph: work_scale is 1)
