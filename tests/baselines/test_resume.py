@@ -13,7 +13,10 @@ from baselines.cli import main, resume_command
 
 SMALL = ["--agents", "1", "2", "--problems", "2", "--difficulty", "easy", "--nodes", "150", "--methods",
          "unconstrained_policy", "sorb", "--no-figure", "--no-progress", "--seed", "3", "--max-cycles", "60"]
-RUNNER = "import sys; from baselines.cli import main; sys.exit(main(sys.argv[1:]))"
+#: the command as a terminal runs it: Ctrl-C raises KeyboardInterrupt even where the test itself was started in
+#: the background (a non-interactive shell starts background jobs with SIGINT ignored, and children inherit that)
+RUNNER = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+          "from baselines.cli import main; sys.exit(main(sys.argv[1:]))")
 
 
 def rows(path):
