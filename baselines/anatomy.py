@@ -30,6 +30,8 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequenc
 
 import numpy as np
 
+from .output import in_cell_order
+
 #: the reasons, in the order they are tested
 REASONS = ("never_planned", "deadlock", "out_of_time", "blocked_by_parked", "stuck_on_leg")
 
@@ -226,8 +228,7 @@ def failure_summary(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
         c["failed_agents"] += len(reasons)
         for reason in reasons:
             c[reason] += 1
-    order = {d: i for i, d in enumerate(("easy", "medium", "hard"))}
-    return [cells[k] for k in sorted(cells, key=lambda k: (k[0], order.get(k[2], 9), k[1]))]
+    return in_cell_order(cells)
 
 
 def anatomy_table(summary: Sequence[Dict[str, Any]]) -> str:

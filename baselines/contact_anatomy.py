@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
+from .output import in_cell_order, parse_named_values
+
 #: the reasons, in the order they are tested
 CONTACT_REASONS = ("parked", "goals_close", "off_plan", "into_holding", "both_driving")
 #: controller activities (:data:`~agents.search.stats.ACTIVITIES`) off the plan
@@ -58,15 +60,7 @@ def contact_reasons_field(counts: Mapping[str, int]) -> str:
 
 def parse_contact_reasons(text: Any) -> Dict[str, int]:
     """The counts of a row's ``contact_reasons`` field (see :func:`contact_reasons_field`)."""
-    if not isinstance(text, str) or not text:
-        return {}
-    out = {}
-    for part in text.split(";"):
-        name, _, value = part.partition("=")
-        if name not in CONTACT_REASONS:
-            raise ValueError(f"unknown contact reason {name!r} in {text!r}; known: {list(CONTACT_REASONS)}")
-        out[name] = int(value)
-    return out
+    return parse_named_values(text, CONTACT_REASONS, int, "contact_reasons")
 
 
 def contact_summary(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
@@ -85,8 +79,7 @@ def contact_summary(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
         for reason, n in parse_contact_reasons(r.get("contact_reasons")).items():
             c[reason] += n
             c["contacts"] += n
-    order = {d: i for i, d in enumerate(("easy", "medium", "hard"))}
-    return [cells[k] for k in sorted(cells, key=lambda k: (k[0], order.get(k[2], 9), k[1]))]
+    return in_cell_order(cells)
 
 
 def contact_table(summary: Sequence[Dict[str, Any]]) -> str:

@@ -22,6 +22,8 @@ import numpy as np
 
 from agents.search.stats import ACTIVITIES
 
+from .output import parse_named_values
+
 
 def cost_split_field(split: np.ndarray, cost: np.ndarray) -> str:
     """The compact form kept in a run's row: the costliest agent's cost per activity, as
@@ -35,15 +37,7 @@ def cost_split_field(split: np.ndarray, cost: np.ndarray) -> str:
 
 def parse_cost_split(text: Any) -> Dict[str, float]:
     """The activities and costs of a row's ``cost_split`` field (see :func:`cost_split_field`)."""
-    if not isinstance(text, str) or not text:
-        return {}
-    out = {}
-    for part in text.split(";"):
-        name, _, value = part.partition("=")
-        if name not in ACTIVITIES:
-            raise ValueError(f"unknown activity {name!r} in cost_split {text!r}; known: {list(ACTIVITIES)}")
-        out[name] = float(value)
-    return out
+    return parse_named_values(text, ACTIVITIES, float, "cost_split")
 
 
 def cost_anatomy(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:

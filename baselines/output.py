@@ -179,5 +179,27 @@ def parse_row(r: Dict[str, Any]) -> Dict[str, Any]:
     return r
 
 
+def parse_named_values(text: Any, known: Sequence[str], cast: Any, field: str) -> Dict[str, Any]:
+    """A row field of ``name=value`` parts joined by ``;`` (empty: none) as a dict, each value
+    ``cast``; a name not in ``known`` is refused, naming the field."""
+    if not isinstance(text, str) or not text:
+        return {}
+    out = {}
+    for part in text.split(";"):
+        name, _, value = part.partition("=")
+        if name not in known:
+            raise ValueError(f"unknown name {name!r} in {field} {text!r}; known: {list(known)}")
+        out[name] = cast(value)
+    return out
+
+
+def in_cell_order(cells: Dict[tuple, Any]) -> List[Any]:
+    """The values of ``cells`` keyed by ``(method, agents, difficulty)``, by method, then difficulty
+    (easy, medium, hard), then agent count."""
+    order = {d: i for i, d in enumerate(("easy", "medium", "hard"))}
+    return [cells[k] for k in sorted(cells, key=lambda k: (k[0], order.get(k[2], 9), k[1]))]
+
+
 __all__ = ["FIGURES_OUT", "NUMERIC_FIELDS", "RowWriter", "add_figure_output_arguments", "check_output_dir",
-           "figure_output_dir", "parse_row", "read_kept_rows", "read_rows", "write_rows_atomic"]
+           "figure_output_dir", "in_cell_order", "parse_named_values", "parse_row", "read_kept_rows", "read_rows",
+           "write_rows_atomic"]

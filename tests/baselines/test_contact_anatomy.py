@@ -30,7 +30,7 @@ def test_the_row_field_round_trips_in_the_order_of_the_reasons():
     assert text == "parked=1;both_driving=3"
     assert parse_contact_reasons(text) == {"parked": 1, "both_driving": 3}
     assert contact_reasons_field({}) == "" and parse_contact_reasons("") == {}
-    with pytest.raises(ValueError, match="unknown contact reason 'bumped'"):
+    with pytest.raises(ValueError, match="unknown name 'bumped' in contact_reasons"):
         parse_contact_reasons("bumped=2")
     with pytest.raises(ValueError, match="unknown contact reasons"):
         contact_reasons_field({"bumped": 2})

@@ -25,7 +25,7 @@ def test_the_row_keeps_the_costliest_agents_split_and_reads_it_back():
     assert field == "drive=3.00;park=2.50"
     assert parse_cost_split(field) == {"drive": 3.0, "park": 2.5}
     assert cost_split_field(np.zeros((0, len(ACTIVITIES))), np.zeros(0)) == "" and parse_cost_split("") == {}
-    with pytest.raises(ValueError, match="unknown activity 'nap'"):
+    with pytest.raises(ValueError, match="unknown name 'nap' in cost_split"):
         parse_cost_split("drive=1.0;nap=2.0")
 
 
