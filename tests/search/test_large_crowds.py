@@ -9,7 +9,7 @@ import pytest
 
 from agents.search.mapf import MapfInstance, Proximity, compiled, solve_prioritized, validate
 from agents.search.mapf import sipp as sipp_module
-from agents.search.mapf.prioritized import _blocks_start, start_blockers
+from agents.search.mapf.prioritized import start_blockers
 from agents.search.mapf.validate import _conflicts
 
 
@@ -110,12 +110,17 @@ def test_the_compiled_loop_is_the_python_one():
     assert compiled.sipp_durative.py_func is compiled._sipp_durative_py
 
 
+def _blocks(inst, goal, start):
+    """The definition: an agent parked at ``goal`` blocks one waiting at ``start``."""
+    return goal == start or (inst.near_mat is not None and bool(inst.near_mat[goal, start]))
+
+
 def test_start_blockers_are_the_pairs_that_block():
     for seed in range(4):
         inst = grid_instance(6, 10, seed, radius=2.5)
         got = start_blockers(inst)
         for i in range(inst.n_agents):
-            want = [j for j in range(inst.n_agents) if j != i and _blocks_start(inst, inst.goals[i], inst.starts[j])]
+            want = [j for j in range(inst.n_agents) if j != i and _blocks(inst, inst.goals[i], inst.starts[j])]
             assert got[i] == want
 
 

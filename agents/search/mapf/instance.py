@@ -277,17 +277,18 @@ class MapfInstance:
         if self.n_agents:
             dist = dijkstra(self.durations.T.tocsr(), directed=True, indices=list(self.goals), unweighted=self.unit)
             dist = np.atleast_2d(dist)
-            self._h_array = np.where(np.isfinite(dist), dist, UNREACHABLE).astype(np.int64)
+            self.h_array = np.where(np.isfinite(dist), dist, UNREACHABLE).astype(np.int64)
         else:
-            self._h_array = np.zeros((0, n), dtype=np.int64)
+            self.h_array = np.zeros((0, n), dtype=np.int64)
         #: per agent, the true distance (in steps) from every node to its goal.
-        self.h: List[List[int]] = [row.tolist() for row in self._h_array]
+        self.h: List[List[int]] = [row.tolist() for row in self.h_array]
         self._pred: Optional[List[List[int]]] = None
         self._must_pass: Dict[Tuple[int, int], frozenset] = {}
         self._dist_to: Dict[Tuple[int, frozenset], List[int]] = {}
         #: per agent, the successors of every node from which its goal is reachable, with their
         #: distances (filled in by :func:`agents.search.mapf.successors.goal_successors`)
         self._goal_successors: Dict[int, List[List[Tuple[int, int]]]] = {}
+        self._moves_csr: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
 
     # ------------------------------------------------------------------ graph helpers
     @property
@@ -300,6 +301,20 @@ class MapfInstance:
                     pred[v].append(u)
             self._pred = pred
         return self._pred
+
+    @property
+    def moves_csr(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The moves (waits excluded) as CSR arrays ``(indptr, targets, durations)``, in the order
+        of :attr:`succ_d` (for the compiled loops of :mod:`~agents.search.mapf.compiled`)."""
+        if self._moves_csr is None:
+            rows = [row[1:] for row in self.succ_d]
+            indptr = np.zeros(len(rows) + 1, dtype=np.int64)
+            np.cumsum([len(r) for r in rows], out=indptr[1:])
+            flat = [e for r in rows for e in r]
+            targets = np.array([v for v, _ in flat], dtype=np.int64)
+            durations = np.array([d for _, d in flat], dtype=np.int64)
+            self._moves_csr = (indptr, targets, durations)
+        return self._moves_csr
 
     def dist_to(self, target: int, blocked: frozenset = frozenset()) -> List[int]:
         """Steps from every node to ``target`` (unit time), avoiding ``blocked`` nodes (cached)."""

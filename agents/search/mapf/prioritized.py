@@ -36,7 +36,7 @@ from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
 from .result import CBSResult, CBSStats
-from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, out_arrays, sipp
+from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
 from .solver import DEFAULT_JOINT_CHECK_STATES
 
 #: default SIPP expansions of one solve, over all agents and restarts
@@ -123,15 +123,9 @@ def plan_result(paths: List[Events], lower_bound: int, message: str) -> CBSResul
     return CBSResult(status, paths, soc, max(costs, default=0), lower_bound, message=msg)
 
 
-def _blocks_start(inst: MapfInstance, goal: int, start: int) -> bool:
-    """Whether an agent parked at ``goal`` would block an agent waiting at ``start``."""
-    near = inst.near_mat
-    return goal == start or (near is not None and bool(near[goal, start]))
-
-
 def start_blockers(inst: MapfInstance) -> List[List[int]]:
     """Per agent ``i``, the other agents ``j`` (ascending) whose start an agent parked at ``i``'s
-    goal would block (:func:`_blocks_start`), from the near lists rather than all pairs."""
+    goal would block: the start is the goal or near it (from the near lists, not all pairs)."""
     at: Dict[int, int] = {s: j for j, s in enumerate(inst.starts)}
     near = inst.near
     out: List[List[int]] = []
@@ -193,7 +187,7 @@ def release_order(inst: MapfInstance) -> List[int]:
     for a in range(k):
         cover[reach[a]] += 1
     edges = inst.durations.tocsr()
-    fast = out_arrays(inst) if compiled.active() else None  # the same test, compiled
+    fast = inst.moves_csr if compiled.active() else None  # the same test, compiled
     left = set(range(k))
     order: List[int] = []
     while left:

@@ -210,29 +210,13 @@ class _SearchArrays:
         self.touched = np.zeros(size, dtype=np.int64)
 
 
-def out_arrays(inst: MapfInstance) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The instance's moves (waiting left out) as CSR arrays ``(indptr, targets, durations)``,
-    in the order of ``inst.succ_d`` (made once per instance)."""
-    got = getattr(inst, "_out_arrays", None)
-    if got is None:
-        rows = [row[1:] for row in inst.succ_d]
-        indptr = np.zeros(len(rows) + 1, dtype=np.int64)
-        np.cumsum([len(r) for r in rows], out=indptr[1:])
-        flat = [e for r in rows for e in r]
-        targets = np.array([v for v, _ in flat], dtype=np.int64)
-        durs = np.array([d for _, d in flat], dtype=np.int64)
-        got = (indptr, targets, durs)
-        inst._out_arrays = got  # type: ignore[attr-defined]
-    return got
-
-
 def _sipp_compiled(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int],
                    count: List[int], explored: Optional[Set[int]]) -> Optional[Events]:
     """:func:`sipp` under the durative time model by the compiled loop (the same path, the same
     expansions)."""
     arr = table.arrays()
-    indptr, targets, durs = out_arrays(inst)
-    h = inst._h_array[agent]
+    indptr, targets, durs = inst.moves_csr
+    h = inst.h_array[agent]
     arr.expl.fill(0)
     status, code, done, nt = compiled.sipp_durative(
         inst.starts[agent], inst.goals[agent], h, indptr, targets, durs, arr.lo, arr.hi, arr.n, arr.best,
