@@ -124,7 +124,7 @@ def main() -> None:
                 plan = planner.plan(setup.observations[p.start_nodes], setup.observations[p.goal_nodes])
                 cpu.append(time.process_time() - c0)
                 times.append(plan.planning_time)
-                solver_times.append(plan.cbs.stats.runtime_s if plan.cbs is not None else np.nan)
+                solver_times.append(plan.cbs.runtime_s if plan.cbs is not None else np.nan)
                 status[plan.status] += 1
                 socs[name].append(plan.soc if plan.solved else np.nan)
                 if plan.solved:

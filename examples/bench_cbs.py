@@ -122,7 +122,7 @@ def run_one(data: Path, name: str, scen: str, k: Optional[int], solver: str, tim
         "solver": solver, "map": name, "scen": scen, "agents": len(inst.starts), "status": res.status,
         "solved": solved, "soc": res.soc, "lower_bound": res.lower_bound, "time_s": round(elapsed, 3),
         "hl_expanded": res.stats.hl_expanded, "hl_generated": res.stats.hl_generated,
-        "ll_calls": res.stats.ll_calls, "ll_expanded": res.stats.ll_expanded,
+        "ll_calls": res.stats.ll_calls, "ll_expanded": res.work,
         "corridor_splits": res.stats.corridor_splits, "pseudo_corridor_splits": res.stats.pseudo_corridor_splits,
         "group_searches": res.stats.group_searches, "group_raised": res.stats.group_raised,
         "valid": valid,

@@ -121,14 +121,13 @@ def draw_problems(states: np.ndarray, D: np.ndarray, shortest: np.ndarray, k: in
 def check(planner, plan) -> bool:
     """Whether ``plan`` passes :func:`~agents.search.mapf.validate` on the graph, starts, goals and
     proximity the planner planned it with."""
-    from agents.search.mapf import Proximity, validate
+    from agents.search.mapf import validate
 
     problem = plan.problem
     durations = problem.graph.distance.copy()
     durations.data = np.maximum(np.ceil(durations.data - 1e-9), 1.0)
-    k = problem.n_agents
     # the proximity the planner plans with (starts among themselves, goals among themselves exempt)
-    prox = Proximity(planner._proximity_matrix(problem.D, k), planner.proximity_radius)
+    prox = planner.problem_proximity(problem.D, problem.n_agents)
     return not validate(durations, list(problem.start_ids), list(problem.goal_ids), plan.cbs.paths,
                         time_model=planner.time_model, proximity=prox)
 
@@ -175,7 +174,7 @@ def main() -> None:
                 plan = pl.plan(obs[s_ids], obs[g_ids])
                 cpu.append(time.process_time() - c0)
                 times.append(plan.planning_time)
-                solver_times.append(plan.cbs.stats.runtime_s if plan.cbs is not None and plan.cbs.stats else np.nan)
+                solver_times.append(plan.cbs.runtime_s if plan.cbs is not None else np.nan)
                 status[f"{plan.status} ({plan.solver})"] += 1
                 if plan.solved:
                     socs.append(plan.soc)

@@ -21,7 +21,17 @@ without a critic.
 """
 from .controller import AgentPlan, WaypointController
 from .graph import ProblemGraph, WaypointGraph, build_problem_graph
-from .mapf import CBSResult, CBSSolver, MapfInstance, Proximity, integer_durations, solve_cbs, validate
+from .mapf import (
+    CBSResult,
+    CBSSolver,
+    MapfInstance,
+    MapfResult,
+    Proximity,
+    SolverConfig,
+    integer_durations,
+    solve_cbs,
+    validate,
+)
 from .models import distance_fn, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
 from .policy import SearchPolicy
@@ -30,8 +40,9 @@ from .single import Plan, risk_bounded_path, shortest_path
 from .waypoints import direct_plans
 
 __all__ = [
-    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MultiAgentPlan", "Plan", "ProblemGraph",
-    "Proximity", "SafetyLayer", "SafetyState", "SearchPolicy", "WaypointController", "WaypointGraph",
+    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MapfResult", "MultiAgentPlan", "Plan",
+    "ProblemGraph", "Proximity", "SafetyLayer", "SafetyState", "SearchPolicy", "SolverConfig", "WaypointController",
+    "WaypointGraph",
     "build_problem_graph", "direct_plans", "distance_fn", "integer_durations", "policy_fn", "risk_bounded_path",
     "shortest_path", "solve_cbs", "team_positions", "validate",
 ]

@@ -461,6 +461,68 @@ class WaypointGraph:
 
 
 # ---------------------------------------------------------------------- problem graphs
+class BorderedMatrix:
+    """A dense ``(N + M, N + M)`` matrix kept as a shared ``(N, N)`` block (not copied) and its
+    ``M`` border rows and columns: what a problem graph of a few agents keeps of ``D`` or ``C``
+    once planned, instead of a copy of the buffer's matrix per replan.
+
+    Indexing by two integers, or by an integer and a slice, reads the parts without building the
+    whole matrix; any other use (``np.asarray``, fancy indexing) builds it.
+
+    Args:
+        inner: the shared ``(N, N)`` block.
+        rows: the last ``M`` rows, ``(M, N + M)``.
+        cols: the last ``M`` columns, ``(N + M, M)``.
+    """
+
+    def __init__(self, inner: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> None:
+        n, m = inner.shape[0], rows.shape[0]
+        if inner.shape != (n, n) or rows.shape != (m, n + m) or cols.shape != (n + m, m):
+            raise ValueError(f"a bordered matrix needs (N, N), (M, N + M) and (N + M, M) parts, got "
+                             f"{inner.shape}, {rows.shape} and {cols.shape}")
+        self.inner, self.rows, self.cols, self.n = inner, rows, cols, n
+        self.shape = (n + m, n + m)
+        self.dtype = rows.dtype
+        self.ndim = 2
+
+    @classmethod
+    def of(cls, full: np.ndarray, inner: np.ndarray) -> "BorderedMatrix":
+        """``full`` kept as ``inner`` (which must equal its top-left block) and its border."""
+        n = inner.shape[0]
+        return cls(inner, full[n:, :].copy(), full[:, n:].copy())
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key: Any) -> Any:
+        if isinstance(key, tuple) and len(key) == 2:
+            i, j = key
+            n = self.n
+            if isinstance(i, (int, np.integer)) and not isinstance(i, bool):
+                i = int(i) % self.shape[0]
+                if i >= n:
+                    return self.rows[i - n][j]
+                if isinstance(j, (int, np.integer)) and not isinstance(j, bool):
+                    j = int(j) % self.shape[1]
+                    return self.inner[i, j] if j < n else self.cols[i, j - n]
+                if isinstance(j, slice):
+                    return np.concatenate([self.inner[i], self.cols[i]])[j]
+            elif isinstance(i, slice) and isinstance(j, (int, np.integer)) and not isinstance(j, bool):
+                j = int(j) % self.shape[1]
+                if j >= n:
+                    return self.cols[i, j - n]
+                return np.concatenate([self.inner[:, j], self.rows[:, j]])[i]
+        return np.asarray(self)[key]
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        n = self.n
+        out = np.empty(self.shape, dtype=self.dtype if dtype is None else dtype)
+        out[:n, :n] = self.inner
+        out[n:, :] = self.rows
+        out[:, n:] = self.cols
+        return out
+
+
 @dataclass
 class ProblemGraph:
     """The graph one planning problem is solved on: buffer nodes plus each agent's endpoints.
@@ -491,6 +553,18 @@ class ProblemGraph:
     @property
     def n_agents(self) -> int:
         return (len(self.observations) - self.n_buffer) // 2
+
+    def compact(self, D: np.ndarray, C: np.ndarray) -> "ProblemGraph":
+        """This problem graph with ``D`` and ``C`` kept as :class:`BorderedMatrix` over the buffer's
+        own matrices ``D`` and ``C`` (the planner's, which its top-left blocks equal): what is
+        worth keeping of a problem of one agent on a large graph (its dense matrices would be
+        a copy of the buffer's)."""
+        n = self.n_buffer
+        if D.shape != (n, n) or C.shape != (n, n):
+            raise ValueError(f"the buffer's matrices must be ({n}, {n}), got {D.shape} and {C.shape}")
+        return ProblemGraph(self.observations, BorderedMatrix.of(self.D, D),  # type: ignore[arg-type]
+                            BorderedMatrix.of(self.C, C), self.graph, n,  # type: ignore[arg-type]
+                            self.c_max, self.connected)
 
     @property
     def start_ids(self) -> List[int]:
@@ -564,14 +638,27 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
                   slack: float, d_max: Optional[float] = None) -> np.ndarray:
     """``(M, M)`` mask of the edges ``u -> v`` among ``observations`` (distances ``D``) that pass
     one of ``places``: going through it is at most ``slack`` longer than the edge. An edge that
-    ends at such a place passes it too. ``d_max`` as for :func:`attach_endpoints`."""
+    ends at such a place passes it too. ``d_max`` as for :func:`attach_endpoints`; with it, only
+    pairs closer than ``d_max`` (the edges a problem graph may hold) are marked."""
     within = getattr(pairwise, "within", None)
     score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
     to_place, _ = score(observations, places)
     from_place, _ = score(places, observations)
     out = np.zeros(D.shape, dtype=bool)
+    # an edge (shorter than d_max) through a place comes within d_max + slack of it at both ends: only
+    # the pairs of such nodes are compared
+    limit = np.inf if d_max is None else float(d_max) + slack
     for j in range(len(places)):
-        out |= to_place[:, j, None] + from_place[j, None, :] <= D + slack
+        us = np.flatnonzero(to_place[:, j] < limit)
+        vs = np.flatnonzero(from_place[j] < limit)
+        if not (len(us) and len(vs)):
+            continue
+        block = np.ix_(us, vs)
+        d = D[block]
+        through = to_place[us, j][:, None] + from_place[j, vs][None, :] <= d + slack
+        if d_max is not None:
+            through &= d < d_max
+        out[block] |= through
     np.fill_diagonal(out, False)
     return out
 
@@ -676,5 +763,6 @@ def build_problem_graph(
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 
 
-__all__ = ["NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints", "build_problem_graph",
-           "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges", "problem_edge_mask"]
+__all__ = ["BorderedMatrix", "NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints",
+           "build_problem_graph", "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges",
+           "problem_edge_mask"]

@@ -52,13 +52,19 @@ from .graph import (
     check_endpoints,
     passing_edges,
 )
-from .mapf import CBSResult, CBSSolver, Proximity
+from .mapf import CBSResult, MapfResult, Proximity
 from .mapf.instance import MapfInstance
-from .mapf.lacam import solve_lacam
-from .mapf.lns import solve_lns
-from .mapf.paths import spread_mode
-from .mapf.pibt import solve_pibt
-from .mapf.prioritized import solve_prioritized
+from .mapf.registry import (
+    AUTO_SEARCH_AGENTS,
+    DEFAULT_CBS_EXPANSION_LIMIT,
+    DEFAULT_LACAM_EXPANSIONS_PER_AGENT,
+    DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
+    DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
+    DEFAULT_STEPPER_EXPANSIONS_PER_AGENT,
+    SolverConfig,
+    solve,
+)
+from .mapf.registry import SOLVERS as REGISTERED_SOLVERS
 from .models import default_detour
 from .pruning import long_legs, route_from_predecessors
 from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
@@ -66,37 +72,17 @@ from .sparsify import two_way_consistent
 from .waypoints import waypoints_from_paths
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
-SOLVERS = ("auto", "cbs", "prioritized", "lns", "pibt", "lacam")
-#: ``solver="auto"``: CBS / ECBS up to this many agents, prioritised planning above (and the
-#: large-neighbourhood repair where CBS / ECBS runs out of its budget, the priority inheritance
-#: stepper where prioritised planning does).
-AUTO_SEARCH_AGENTS = 20
-#: default ``expansion_limit`` of one CBS / ECBS call: about 5 s with 20 agents on a 1000-node
-#: buffer graph on an idle machine
-DEFAULT_EXPANSION_LIMIT = 50_000
+SOLVERS = tuple(REGISTERED_SOLVERS)
 #: edge-steps per node (the sum of the problem graph's edge durations over its nodes) up to which one
 #: CBS / ECBS call may make ``expansion_limit`` expansions; on a denser graph, where an expansion scans
 #: more edges, the call may make proportionally fewer (1000-node graphs: CentralObstacle about 290,
 #: the apartments up to about 480, CenterDot's small room about 2,200)
 REFERENCE_EDGE_STEPS = 600
-#: default ``prioritized_expansions_per_agent``: 200 agents on the 1000-node buffer graph take
-#: 64,000 to 426,000 safe-interval expansions (hard problems; 222 agents, the most the
-#: 1000-node graph places, are not solved)
-DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT = 2_500
 #: buffer nodes up to which ``prioritized_expansions_per_agent`` holds as given; on a graph of more
 #: nodes, where one agent's safe-interval search explores more of them, it grows in proportion (1000
 #: agents on hard problems of the 4000-node scatter-64-64 graph take 1,650 to 2,000 expansions per
 #: agent where the first order succeeds, 3,400 with one restart, 9,500 with four)
 REFERENCE_BUFFER_NODES = 1000
-#: default ``repair_expansions_per_agent``: the large-neighbourhood repair's budget per agent
-DEFAULT_REPAIR_EXPANSIONS_PER_AGENT = 3_000
-#: default ``stepper_expansions_per_agent``: the priority inheritance stepper's budget per agent
-#: (222 agents on the 1000-node buffer graph take 2,300 to 2,600 per agent)
-DEFAULT_STEPPER_EXPANSIONS_PER_AGENT = 10_000
-#: default ``lacam_expansions_per_agent``: the configuration search's budget per agent (its first plan for
-#: 100 agents on a hard problem of the 1000-node buffer graph takes about 520,000 in all, 1.5 s; what is left
-#: goes to improving it)
-DEFAULT_LACAM_EXPANSIONS_PER_AGENT = 20_000
 #: default ``d_max`` (predicted steps): edges of the graph are shorter
 DEFAULT_D_MAX = 7.0
 #: the cost :meth:`BufferPlanner.from_agent` with a ``bound`` gives the pairs it never read (never an edge)
@@ -114,16 +100,6 @@ def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
         if first[k] != i:
             return int(first[k]), i
     return None
-
-
-def _scaled(limit: Optional[int], scale: float) -> Optional[int]:
-    """A budget times ``scale`` (at least 1; ``None``: none)."""
-    return None if limit is None else (limit if scale >= 1.0 else max(1, int(limit * scale)))
-
-
-def _times(per_agent: Optional[int], k: int) -> Optional[int]:
-    """A solve's work budget from a per-agent one (``None``: no limit)."""
-    return None if per_agent is None else per_agent * k
 
 
 @dataclass
@@ -313,7 +289,7 @@ class BufferPlanner:
         time_model: str = "durative",
         suboptimality: float = 1.1,
         solver: str = "auto",
-        expansion_limit: Optional[int] = DEFAULT_EXPANSION_LIMIT,
+        expansion_limit: Optional[int] = DEFAULT_CBS_EXPANSION_LIMIT,
         prioritized_expansions_per_agent: Optional[int] = DEFAULT_PRIORITIZED_EXPANSIONS_PER_AGENT,
         repair_expansions_per_agent: Optional[int] = DEFAULT_REPAIR_EXPANSIONS_PER_AGENT,
         repair_seed: int = 0,
@@ -351,44 +327,40 @@ class BufferPlanner:
         self.endpoint_edges = int(endpoint_edges)
         self.proximity_radius = proximity_radius
         self.time_model = time_model
-        self.suboptimality = float(suboptimality)
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-        for name, lim in (("expansion_limit", expansion_limit),
-                          ("prioritized_expansions_per_agent", prioritized_expansions_per_agent),
-                          ("repair_expansions_per_agent", repair_expansions_per_agent),
-                          ("stepper_expansions_per_agent", stepper_expansions_per_agent),
-                          ("lacam_expansions_per_agent", lacam_expansions_per_agent)):
-            if lim is not None and not (isinstance(lim, (int, np.integer)) and not isinstance(lim, bool)
-                                        and lim >= 1):
-                raise ValueError(f"{name} must be an integer >= 1 or None, got {lim!r}")
         if isinstance(repair_seed, bool) or not isinstance(repair_seed, (int, np.integer)):
             raise ValueError(f"repair_seed must be an integer, got {repair_seed!r}")
-        if time_limit is not None and not time_limit > 0:
-            raise ValueError(f"time_limit must be > 0 seconds or None, got {time_limit!r}")
-        for name, factor in (("fallback_suboptimality", fallback_suboptimality), ("cost_guard", cost_guard),
-                             ("detour", detour)):
+        # the solver options, checked by the configuration (the planner's names: solver, repair_seed, spread_routes)
+        self._solver_config = SolverConfig(
+            name=solver, suboptimality=suboptimality, fallback_suboptimality=fallback_suboptimality,
+            expansion_limit=expansion_limit, prioritized_expansions_per_agent=prioritized_expansions_per_agent,
+            repair_expansions_per_agent=repair_expansions_per_agent,
+            stepper_expansions_per_agent=stepper_expansions_per_agent,
+            lacam_expansions_per_agent=lacam_expansions_per_agent, time_limit=time_limit, seed=repair_seed,
+            spread=spread_routes)
+        for name, factor in (("cost_guard", cost_guard), ("detour", detour)):
             if factor is not None and not factor >= 1.0:
                 raise ValueError(f"{name} must be >= 1 or None, got {factor!r}")
         if max_edges is not None and int(max_edges) < 1:
             raise ValueError(f"max_edges must be >= 1 or None, got {max_edges!r}")
         if max_leg is not None and not (max_leg > 0 and (second_opinion is not None or max_leg == math.inf)):
             raise ValueError(f"max_leg must be > 0 and needs a second_opinion to read legs with, got {max_leg!r}")
-        self.solver = solver
-        limits = (expansion_limit, prioritized_expansions_per_agent, repair_expansions_per_agent,
-                  stepper_expansions_per_agent, lacam_expansions_per_agent)
-        (self.expansion_limit, self.prioritized_expansions_per_agent, self.repair_expansions_per_agent,
-         self.stepper_expansions_per_agent, self.lacam_expansions_per_agent) = (None if v is None else int(v)
-                                                                                for v in limits)
-        self.repair_seed = int(repair_seed)
-        self.time_limit = None if time_limit is None else float(time_limit)
+        config = self._solver_config
+        self.solver = config.name
+        self.suboptimality = config.suboptimality
+        self.fallback_suboptimality = config.fallback_suboptimality
+        self.expansion_limit = config.expansion_limit
+        self.prioritized_expansions_per_agent = config.prioritized_expansions_per_agent
+        self.repair_expansions_per_agent = config.repair_expansions_per_agent
+        self.stepper_expansions_per_agent = config.stepper_expansions_per_agent
+        self.lacam_expansions_per_agent = config.lacam_expansions_per_agent
+        self.repair_seed = config.seed
+        self.time_limit = config.time_limit
         self.relax_cost = bool(relax_cost)
-        self.fallback_suboptimality = fallback_suboptimality
         self.budget_labels = int(budget_labels)
         self.max_edges = None if max_edges is None else int(max_edges)
         self.cost_guard = None if cost_guard is None else float(cost_guard)
         self.detour = None if detour is None else float(detour)
-        self.spread_routes = spread_mode(spread_routes)
+        self.spread_routes = config.spread
         self.second_opinion = second_opinion
         self.max_leg = None if max_leg is None else float(max_leg)
         #: the buffer's long legs by (d_max, max_leg), shared by the planners with_options makes
@@ -399,6 +371,12 @@ class BufferPlanner:
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
+
+    @property
+    def solver_config(self) -> SolverConfig:
+        """The solver and its options (``solver``, ``suboptimality``, the budgets, ``time_limit``,
+        ``repair_seed``, ``spread_routes``) as one :class:`~agents.search.mapf.registry.SolverConfig`."""
+        return self._solver_config
 
     @property
     def buffer_graph(self) -> WaypointGraph:
@@ -567,46 +545,15 @@ class BufferPlanner:
         out.planning_time = time.perf_counter() - t0
         return out
 
-    def _solve(self, durations: sparse.csr_matrix, s_ids, g_ids, D: np.ndarray) -> Tuple[CBSResult, str]:
-        """Run the solver ``self.solver`` picks for this many agents; ``(result, solver used)``."""
+    def _solve(self, durations: sparse.csr_matrix, s_ids, g_ids, D: np.ndarray) -> Tuple[MapfResult, str]:
+        """Run the solver ``self.solver`` names (:func:`~agents.search.mapf.registry.solve`, ``"auto"``: the
+        cascade that picks by the number of agents); ``(result, solver used)``."""
         k = len(s_ids)
-        prox = Proximity(self._proximity_matrix(D, k), self.proximity_radius) if self.proximity_radius else None
+        prox = self.problem_proximity(D, k)
         inst = MapfInstance(durations, s_ids, g_ids, time_model=self.time_model, proximity=prox)
-        scale = self.work_scale(durations)  # every budget in the same work on dense graphs
-        solver = self.solver
-        auto = solver == "auto"
-        if auto:
-            solver = "cbs" if k <= AUTO_SEARCH_AGENTS else "prioritized"
-        if solver == "lns":
-            return self._repair(inst, scale), "lns"
-        if solver == "pibt":
-            return self._step(inst, scale), "pibt"
-        if solver == "lacam":
-            return self._search_configurations(inst, scale), "lacam"
-        if solver == "prioritized":
-            # no CBS / ECBS behind it: with this many agents they run out of any budget (measured:
-            # ECBS w = 1.1 times out on every hard 100-agent problem of the benchmark)
-            budget = _times(self.prioritized_expansions_per_agent, k)
-            if budget is not None:
-                budget = int(budget * self.size_scale())
-            res = solve_prioritized(inst, expansion_limit=_scaled(budget, scale), time_limit=self.time_limit)
-            if auto and res.status == "timeout":
-                stepped = self._step(inst, scale)
-                stepped.message = f"{stepped.message} (after prioritized: {res.message})"
-                return stepped, "pibt"
-        else:
-            fb = self.fallback_suboptimality
-            limit = _scaled(self.expansion_limit, scale)
-            for w in (self.suboptimality,) if fb is None or fb <= self.suboptimality else (self.suboptimality, fb):
-                res = CBSSolver(inst, suboptimality=w, time_limit=self.time_limit, expansion_limit=limit,
-                                spread=self.spread_routes).solve()
-                if res.status != "timeout":
-                    break
-        if auto and solver == "cbs" and res.status == "timeout":
-            repaired = self._repair(inst, scale)
-            repaired.message = f"{repaired.message} (after {solver}: {res.message})"
-            return repaired, "lns"
-        return res, solver
+        # every budget in the same work on dense graphs; prioritised planning's grows with the graph's size
+        res = solve(inst, self._solver_config, scale=self.work_scale(durations), size_scale=self.size_scale())
+        return res, res.solver
 
     @staticmethod
     def work_scale(durations: sparse.csr_matrix) -> float:
@@ -621,41 +568,29 @@ class BufferPlanner:
         ``REFERENCE_BUFFER_NODES`` buffer nodes, their number over it above."""
         return max(1.0, len(self.observations) / REFERENCE_BUFFER_NODES)
 
-    def _repair(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
-        """The large-neighbourhood repair with this planner's budget (times ``scale``) and seed."""
-        return solve_lns(inst, expansion_limit=_scaled(_times(self.repair_expansions_per_agent, inst.n_agents), scale),
-                         time_limit=self.time_limit, seed=self.repair_seed)
-
-    def _step(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
-        """The priority inheritance stepper with this planner's budget (times ``scale``)."""
-        return solve_pibt(inst, expansion_limit=_scaled(_times(self.stepper_expansions_per_agent, inst.n_agents),
-                                                        scale), time_limit=self.time_limit)
-
-    def _search_configurations(self, inst: MapfInstance, scale: float = 1.0) -> CBSResult:
-        """The LaCAM* configuration search with this planner's budget (times ``scale``) and seed."""
-        return solve_lacam(inst, expansion_limit=_scaled(_times(self.lacam_expansions_per_agent, inst.n_agents),
-                                                         scale), time_limit=self.time_limit, seed=self.repair_seed)
-
-    def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> CBSResult:
-        """The optimal timed path of a lone agent (Dijkstra over edge durations), as CBS reports it."""
+    def _single_agent_path(self, durations: sparse.csr_matrix, s: int, g: int) -> MapfResult:
+        """The optimal timed path of a lone agent (Dijkstra over edge durations; solver ``"single"``, no work
+        counted)."""
         dist, pred = dijkstra(durations, directed=True, indices=s, return_predecessors=True)
         if not np.isfinite(dist[g]):
-            return CBSResult("infeasible", message="no path from start to goal")
+            return MapfResult("infeasible", message="no path from start to goal", time_model=self.time_model,
+                              solver="single")
         nodes = route_from_predecessors(pred, s, g)
         path = [(int(v), int(round(dist[v]))) for v in nodes]
         t = int(round(dist[g]))
-        return CBSResult("optimal", paths=[path], soc=t, makespan=t, lower_bound=t,
-                         message="a single agent: shortest path", time_model=self.time_model)
+        return MapfResult("optimal", paths=[path], soc=t, makespan=t, lower_bound=t,
+                          message="a single agent: shortest path", time_model=self.time_model, solver="single")
 
-    def _proximity_matrix(self, D: np.ndarray, k: int) -> np.ndarray:
-        """Node distances for proximity conflicts; starts among themselves (and goals among
-        themselves) are exempt: agents placed or parked side by side by the environment are
-        not a planning conflict, and otherwise such a problem could never be solved."""
+    def problem_proximity(self, D: np.ndarray, k: int) -> Optional[Proximity]:
+        """The proximity conflicts of a problem graph with distances ``D`` and ``k`` agents
+        (``None`` without a proximity radius): nodes closer than the radius; starts among
+        themselves (and goals among themselves) are exempt: agents placed or parked side by side
+        by the environment are not a planning conflict, and otherwise such a problem could never
+        be solved."""
+        if not self.proximity_radius:
+            return None
         n = len(self.observations)
-        P = D.copy()
-        for lo in (n, n + k):
-            P[lo:lo + k, lo:lo + k] = np.inf
-        return P
+        return Proximity(D, self.proximity_radius, exempt=((n, n + k), (n + k, n + 2 * k)))
 
     @staticmethod
     def _route_cost(C: np.ndarray, nodes: List[int]) -> float:

@@ -227,7 +227,9 @@ class StuckReplanning:
         keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent],
                                      straight=self._straight(sub.problem))
         self.routes[agent] = [sub.nodes[0][i] for i in keep]
-        self._route_graph[agent] = (sub.problem, sub.problem.goal_ids[0], self.controller.t)
+        # kept as long as the route: its matrices as the buffer's and a border, not a copy of them
+        self._route_graph[agent] = (sub.problem.compact(self.planner.D, self.planner.C), sub.problem.goal_ids[0],
+                                    self.controller.t)
         self._seen_index[agent] = 0
         return AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
 

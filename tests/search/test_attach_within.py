@@ -12,7 +12,7 @@ import torch as th
 import safe_mapf_envs  # noqa: F401
 from agents import load_pretrained
 from agents.search.graph import NodePairwise
-from agents.search.mapf import Proximity, validate
+from agents.search.mapf import validate
 from agents.search.planner import BufferPlanner
 from agents.self_sampling import observations_at
 
@@ -60,6 +60,6 @@ def test_plans_are_those_of_scoring_every_pair(setting, solver):
     assert a.solved and (a.status, a.soc, a.nodes, a.depart_times) == (b.status, b.soc, b.nodes, b.depart_times)
     dur = a.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
-    prox = Proximity(planner._proximity_matrix(a.problem.D, len(starts)), planner.proximity_radius)
+    prox = planner.problem_proximity(a.problem.D, len(starts))
     assert validate(dur, a.problem.start_ids, a.problem.goal_ids, a.cbs.paths, time_model="durative",
                     proximity=prox) == []

@@ -44,15 +44,15 @@ def _runs():
     pp_inst = _grid_instance(11, 60)
     ecbs_inst = _grid_instance(1, 20, size=10)
     pp = solve_prioritized(pp_inst)
-    pp_cut = solve_prioritized(pp_inst, expansion_limit=pp.stats.ll_expanded // 2)
+    pp_cut = solve_prioritized(pp_inst, expansion_limit=pp.work // 2)
     ecbs = CBSSolver(ecbs_inst, suboptimality=1.05, time_limit=60).solve()
     ecbs_cut = CBSSolver(ecbs_inst, suboptimality=1.05, time_limit=60,
-                         expansion_limit=ecbs.stats.ll_expanded // 2).solve()
+                         expansion_limit=ecbs.work // 2).solve()
     return [(pp_inst, r) for r in (pp, pp_cut)] + [(ecbs_inst, r) for r in (ecbs, ecbs_cut)]
 
 
 def _fingerprint(res):
-    return res.status, res.paths, res.soc, res.stats.ll_expanded, res.stats.hl_expanded
+    return res.status, res.paths, res.soc, res.work, res.stats
 
 
 def test_plans_are_the_same_under_cpu_load(request):

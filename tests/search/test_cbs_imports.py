@@ -6,8 +6,8 @@ import agents.search.mapf as mapf
 def test_package_exports_the_public_api():
     for name in mapf.__all__:
         assert hasattr(mapf, name), name
-    for name in ("solve_cbs", "CBSSolver", "CBSResult", "validate", "MapfInstance", "Proximity",
-                 "integer_durations"):
+    for name in ("solve_cbs", "CBSSolver", "CBSResult", "MapfResult", "SolverConfig", "validate", "MapfInstance",
+                 "Proximity", "integer_durations"):
         assert getattr(search, name) is getattr(mapf, name)
 
 

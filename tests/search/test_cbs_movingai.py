@@ -70,8 +70,9 @@ def test_cli_json_and_paths_out(tmp_path, capsys):
     rc = main(["mapf", str(m), str(s), "--agents", "10", "--json", "--paths-out", str(out)])
     assert rc == 0
     report = json.loads(capsys.readouterr().out)
-    for key in ("status", "soc", "makespan", "runtime_s", "hl_expanded"):
+    for key in ("status", "soc", "makespan", "runtime_s", "work", "stats"):
         assert key in report
+    assert report["solver_used"] == "cbs" and report["stats"]["hl_expanded"] >= 0 and report["work"] > 0
     assert report["status"] == "optimal" and report["valid"] is True
     paths = json.loads(out.read_text())
     agents = load_scen(s, 10)

@@ -64,7 +64,7 @@ def test_the_array_search_plans_what_the_plain_one_plans(array_search, monkeypat
     plain, fast = solve_both(inst, monkeypatch)
     assert plain.status == fast.status and plain.message == fast.message
     assert fast.paths == plain.paths and fast.soc == plain.soc
-    assert fast.stats.ll_expanded == plain.stats.ll_expanded  # the same work, counted the same
+    assert fast.work == plain.work  # the same work, counted the same
     if fast.solved:
         assert validate(inst, None, None, fast.paths) == []
 
@@ -72,30 +72,65 @@ def test_the_array_search_plans_what_the_plain_one_plans(array_search, monkeypat
 def test_the_array_search_spends_the_same_budget(array_search, monkeypatch):
     inst = grid_instance(8, 8, 1)
     free = solve_prioritized(inst)
-    assert free.solved and free.stats.ll_expanded > 100
-    limit = free.stats.ll_expanded // 2
+    assert free.solved and free.work > 100
+    limit = free.work // 2
     plain, fast = solve_both(inst, monkeypatch, expansion_limit=limit)
     assert plain.status == fast.status == "timeout"
     assert "expansion limit" in fast.message
-    assert fast.stats.ll_expanded == plain.stats.ll_expanded == limit + 1
+    assert fast.work == plain.work == limit + 1
 
 
 def test_the_array_search_keeps_holds_and_releases(array_search):
     # a table whose intervals change between searches: the arrays follow every change
     inst = grid_instance(5, 3, 0)
-    table = sipp_module.IntervalTable(inst)
+    table = sipp_module.interval_table(inst)
+    assert isinstance(table, sipp_module.ArrayIntervalTable)
     table.hold(1, inst.starts[1], sipp_module.FOREVER)
     first = sipp_module.sipp(inst, 0, table)
     table.release(1)
     table.reserve(1, [(inst.starts[1], 0)])
     again = sipp_module.sipp(inst, 0, table)
-    compiled.ENABLED = False
     table2 = sipp_module.IntervalTable(inst)
     table2.hold(1, inst.starts[1], sipp_module.FOREVER)
     assert sipp_module.sipp(inst, 0, table2) == first
     table2.release(1)
     table2.reserve(1, [(inst.starts[1], 0)])
     assert sipp_module.sipp(inst, 0, table2) == again
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_array_table_keeps_what_the_list_table_keeps(array_search, seed):
+    # random holds, releases and reserved paths: the same safe intervals and holders at every node,
+    # also after the arrays outgrow their first size
+    rng = random.Random(seed)
+    inst = grid_instance(6, 6, seed, radius=2.5)
+    plain = sipp_module.IntervalTable(inst)
+    fast = sipp_module.ArrayIntervalTable(inst, capacity=4, intervals=1)
+    n, forever = inst.n_nodes, sipp_module.FOREVER
+    for step in range(60):
+        agent = rng.randrange(inst.n_agents)
+        what = rng.random()
+        if what < 0.3:
+            node, last = rng.randrange(n), rng.choice([0, 5, forever])
+            for table in (plain, fast):
+                table.hold(agent, node, last)
+        elif what < 0.5:
+            for table in (plain, fast):
+                table.release(agent)
+        else:
+            t, u, events = rng.randrange(20), rng.randrange(n), []
+            for _ in range(rng.randint(1, 6)):
+                events.append((u, t))
+                t += rng.randint(1, 4)
+                u = rng.choice([u] + [v for v, _ in inst.succ_d[u][1:]])
+            events.append((u, t))
+            for table in (plain, fast):
+                table.reserve(agent, events)
+        if step % 7 == 0 or step == 59:
+            for v in range(n):
+                assert fast.safe(v) == plain.safe(v), (step, v)
+                assert fast.holders(v) == plain.holders(v), (step, v)
+    assert len(fast.e_next) > 4 and fast.search.cap > 1  # the arrays outgrew their first size
 
 
 def test_unit_time_keeps_the_plain_search(array_search, monkeypatch):
@@ -207,7 +242,8 @@ def test_the_release_order_is_the_same_either_way(array_search, monkeypatch, see
 
 @pytest.mark.parametrize("nodes", [400, 1500])
 def test_the_prioritized_budget_grows_with_the_graph(monkeypatch, nodes):
-    import agents.search.planner as planner_module
+    import agents.search.mapf.registry as registry_module
+    from agents.search.mapf import MapfResult
     from agents.search.planner import REFERENCE_BUFFER_NODES, BufferPlanner
 
     rng = np.random.default_rng(0)
@@ -225,10 +261,55 @@ def test_the_prioritized_budget_grows_with_the_graph(monkeypatch, nodes):
 
     def spy(inst, expansion_limit=None, **kwargs):
         seen["limit"] = expansion_limit
-        return planner_module.CBSResult("timeout", message="spied")
+        return MapfResult("timeout", message="spied", solver="prioritized")
 
-    monkeypatch.setattr(planner_module, "solve_prioritized", spy)
+    monkeypatch.setattr(registry_module, "solve_prioritized", spy)
     k = 3
     picks = rng.choice(nodes, size=2 * k, replace=False)
     planner.plan(obs[picks[:k]] + 0.1, obs[picks[k:]] + 0.1)
     assert seen["limit"] == int(100 * k * planner.size_scale())  # (a sparse graph: work_scale is 1)
+
+
+def test_a_bordered_matrix_reads_as_the_dense_one():
+    from agents.search.graph import BorderedMatrix
+
+    rng = np.random.default_rng(0)
+    full = rng.random((9, 9))
+    inner = full[:7, :7].copy()
+    b = BorderedMatrix.of(full, inner)
+    assert b.shape == full.shape and len(b) == 9
+    for i in range(9):
+        for j in range(9):
+            assert b[i, j] == full[i, j] and b[np.int64(i), np.int64(j)] == full[i, j]
+        assert np.array_equal(b[i, :7], full[i, :7]) and np.array_equal(b[:7, i], full[:7, i])
+        assert np.array_equal(b[i, :], full[i, :]) and np.array_equal(b[:, i], full[:, i])
+    assert b[-1, -2] == full[-1, -2]
+    assert np.array_equal(np.asarray(b), full) and np.array_equal(b[[1, 8], [2, 7]], full[[1, 8], [2, 7]])
+    with pytest.raises(ValueError, match="bordered matrix"):
+        BorderedMatrix(inner, full[7:, :7], full[:, 7:])
+
+
+@pytest.mark.parametrize("d_max", [None, 4.0])
+def test_passing_edges_compare_only_the_nodes_near_a_place(d_max):
+    # the pairs of nodes near each place give what every pair gives, on the edges (pairs closer than d_max)
+    from agents.search.graph import passing_edges
+
+    rng = np.random.default_rng(3)
+    pts = rng.random((60, 2)) * 10
+    places = rng.random((4, 2)) * 10
+
+    def dist(a, b):
+        d = np.linalg.norm(a[:, None] - b[None], axis=-1) * rng.uniform(1.0, 1.2, (len(a), len(b)))
+        return d, np.zeros_like(d)
+
+    D, _ = dist(pts, pts)
+    to_place, _ = dist(pts, places)
+    from_place, _ = dist(places, pts)
+    tables = iter([(to_place, None), (from_place, None)])
+    out = passing_edges(D, pts, lambda a, b: next(tables), places, slack=0.5, d_max=d_max)
+    every = np.zeros_like(out)
+    for j in range(len(places)):
+        every |= to_place[:, j, None] + from_place[j, None, :] <= D + 0.5
+    np.fill_diagonal(every, False)
+    edges = np.ones_like(out) if d_max is None else D < d_max
+    assert out.any() and np.array_equal(out, every & edges)

@@ -251,7 +251,7 @@ def test_repair_on_crowded_tiny_graphs_against_brute_force_and_prioritised_plann
             assert res.status == "timeout"
         solved["lns"] += res.solved
         solved["prioritized"] += solve_prioritized(inst).solved
-        repaired += res.solved and res.stats.hl_generated > 0
+        repaired += res.solved and res.stats.initial_conflicts > 0
     assert repaired >= 3  # plans whose first version had conflicts
     assert solved["lns"] > solved["prioritized"], solved
 
@@ -296,11 +296,11 @@ def test_repair_is_deterministic_for_a_seed_and_reports_its_budget():
     inst = crowded_grid()
     a = solve_lns(inst, seed=3)
     b = solve_lns(inst, seed=3)
-    assert a.solved and a.paths == b.paths and a.stats.ll_expanded == b.stats.ll_expanded
+    assert a.solved and a.paths == b.paths and a.work == b.work
     assert validate(inst, None, None, a.paths) == []
     tiny = solve_lns(inst, expansion_limit=50)
     assert tiny.status == "timeout" and "expansion limit of 50 reached" in tiny.message
-    assert tiny.stats.ll_expanded == 51
+    assert tiny.work == 51
 
 
 def test_repair_reports_infeasible_and_refuses_bad_options():
@@ -309,7 +309,7 @@ def test_repair_reports_infeasible_and_refuses_bad_options():
     assert res.status == "infeasible" and "agent 1" in res.message
     ring = [[(u - 1) % 5, (u + 1) % 5] for u in range(5)]
     res = solve_lns(MapfInstance(ring, [0, 1, 2, 3, 4], [1, 0, 2, 3, 4]))
-    assert res.status == "infeasible" and res.stats.ll_expanded == 0
+    assert res.status == "infeasible" and res.work == 0
     ok = MapfInstance([[1], [0]], [0], [1])
     for kw, word in [(dict(seed=1.5), "seed"), (dict(seed=True), "seed"),
                      (dict(neighborhood_size=0), "neighborhood_size"), (dict(call_limit=0), "call_limit"),

@@ -146,7 +146,7 @@ def test_same_input_same_plan():
     a = solve_pibt(inst, expansion_limit=300_000)
     b = solve_pibt(inst, expansion_limit=300_000)
     assert a.status == b.status == "suboptimal"
-    assert a.paths == b.paths and a.stats.ll_expanded == b.stats.ll_expanded
+    assert a.paths == b.paths and a.work == b.work
     crowd = MapfInstance(open_grid(8), *(np.random.default_rng(0).permutation(64)[:40].tolist() for _ in range(2)))
     assert solve_pibt(crowd, seed=3).paths == solve_pibt(crowd, seed=3).paths
 
@@ -156,7 +156,7 @@ def test_budget_and_stalls_end_in_timeout_with_a_message():
     res = solve_pibt(inst, expansion_limit=500)
     assert res.status == "timeout" and res.paths is None
     assert "expansion limit of 500 reached" in res.message and "agents at their goals" in res.message
-    assert res.stats.ll_expanded > 500
+    assert res.work > 500
     res = solve_pibt(inst, time_limit=1e-9)
     assert res.status == "timeout" and "time limit" in res.message
     # a run with no new agent at its goal for 1 x 4 steps stalls; no restart allowed

@@ -165,7 +165,7 @@ def test_prioritized_expansion_budget_is_reported_as_timeout():
     inst = MapfInstance(adjacency(n, edges), starts, goals, time_model="unit")
     res = solve_prioritized(inst, expansion_limit=20)
     assert res.status == "timeout" and "expansion limit of 20" in res.message
-    assert res.stats.ll_expanded == 21
+    assert res.work == 21
 
 
 def test_initial_order_puts_an_agent_after_the_one_waiting_at_its_goal():
@@ -212,7 +212,7 @@ def test_gives_up_at_once_when_a_restart_would_repeat_the_last_attempt():
     # front again would change nothing, so two attempts in all
     assert release_order(MapfInstance(adj, starts, goals)) == [1, 0]
     assert res.status == "timeout" and "repeat the last attempt" in res.message
-    assert res.stats.hl_expanded == 2
+    assert res.stats.orders == 2
 
 
 def open_route(inst, agent, closed):
@@ -282,7 +282,7 @@ def test_release_order_plans_the_agents_in_the_way_first():
     paths, failed = plan_in_order(inst, [0, 1, 2], [0], deferrals=2)
     assert failed is None and validate(inst, None, None, paths) == []
     res = solve_prioritized(inst)
-    assert res.solved and res.stats.hl_expanded == 1 and validate(inst, None, None, res.paths) == []
+    assert res.solved and res.stats.orders == 1 and validate(inst, None, None, res.paths) == []
     assert solve_prioritized(inst).paths == res.paths
     with pytest.raises(ValueError, match="deferrals"):
         plan_in_order(inst, [0, 1, 2], [0], deferrals=-1)

@@ -105,17 +105,17 @@ def test_a_successor_counts_conflicts_first_and_places_second():
 
 
 def test_planner_passes_spread_routes_to_the_solver(monkeypatch):
-    from agents.search import planner as planner_module
+    from agents.search.mapf import registry as registry_module
     from agents.search.planner import BufferPlanner
 
     seen = []
-    real = planner_module.CBSSolver
+    real = registry_module.CBSSolver
 
     def recording(*args, **kwargs):
         seen.append(kwargs.get("spread"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(planner_module, "CBSSolver", recording)
+    monkeypatch.setattr(registry_module, "CBSSolver", recording)
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 2.0], [1.0, 2.0], [2.0, 2.0]])
 
     def pairwise(a, b):

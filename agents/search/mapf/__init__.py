@@ -64,6 +64,13 @@ Many agents
     its plan towards the optimum with more budget. Budgets of every solver can be counted in expansions
     (``expansion_limit``), so a result does not depend on the machine's load.
 
+Solvers by name
+    :func:`solve` runs the solver a :class:`SolverConfig` names (``"cbs"``, ``"prioritized"``,
+    ``"lns"``, ``"pibt"``, ``"lacam"``, or ``"auto"``: the cascade :data:`AUTO_CASCADE`) with the
+    options and budgets it holds; :func:`register_solver` adds one to :data:`SOLVERS`. Every solver
+    returns a :class:`MapfResult` (status, paths, costs, a lower bound where known, the work it
+    counted, its seconds and name), with its own statistics beside (:class:`CBSStats` for CBS / ECBS).
+
 Feasibility
     :func:`joint_feasible`: an exhaustive search over the agents' joint configurations that
     decides whether any plan exists on small instances; :class:`CBSSolver` runs it before
@@ -71,7 +78,9 @@ Feasibility
     impossible instance is reported ``"infeasible"`` at once.
 
 Public API
-    :func:`solve_cbs`, :class:`CBSSolver`, :class:`CBSResult`, :class:`CBSStats`,
+    :func:`solve`, :class:`SolverConfig`, :func:`register_solver`, :data:`SOLVERS`,
+    :func:`solve_cbs`, :class:`CBSSolver`, :class:`MapfResult` (also under its former name
+    ``CBSResult``), :class:`CBSStats`,
     :class:`CTNode`, :class:`Proximity`, :class:`MapfInstance`, :func:`integer_durations`,
     :func:`validate` to check any solution independently, :func:`solve_prioritized`,
     :func:`solve_lns`, :func:`solve_pibt`, :func:`solve_lacam`,
@@ -80,7 +89,8 @@ Public API
     :func:`load_instance`, :func:`grid_graph`.
 
 Modules, one concept each
-    ``solver`` (entry: options, pre-checks, limits), ``result`` (what a solve returns),
+    ``registry`` (solvers by name, their configuration and the ``"auto"`` cascade), ``solver`` (the
+    CBS entry: options, pre-checks, limits), ``result`` (what a solve returns),
     ``cbs`` (the optimal high-level search and its conflict choice), ``ecbs`` (bounded
     suboptimal), ``heuristics`` (conflict graphs and their vertex covers), ``ctnode`` (the
     constraint-tree node), ``context`` (caches and limits of one solve), ``mdd``, ``paths``
@@ -111,24 +121,26 @@ from .constraints import (
 from .ctnode import CTNode
 from .feasibility import joint_feasible
 from .instance import TIME_MODELS, UNREACHABLE, MapfInstance, Proximity, integer_durations
-from .lacam import solve_lacam
-from .lns import solve_lns
+from .lacam import ConfigurationStats, solve_lacam
+from .lns import RepairStats, solve_lns
 from .movingai import GridInstance, GridMap, ScenAgent, grid_graph, load_instance, load_map, load_scen
 from .paths import SPREAD_MODES
-from .pibt import solve_pibt
-from .prioritized import solve_prioritized
-from .result import STATUSES, CBSResult, CBSStats
+from .pibt import StepperStats, solve_pibt
+from .prioritized import PrioritizedStats, solve_prioritized
+from .registry import AUTO_CASCADE, AUTO_SEARCH_AGENTS, SOLVERS, CascadeStage, SolverConfig, register_solver, solve
+from .result import STATUSES, CBSResult, CBSStats, MapfResult
 from .solver import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_MERGE_THRESHOLD, HEURISTICS, CBSSolver, solve_cbs
 from .validate import validate
 
 __all__ = [
-    "CARDINAL", "CBSResult", "CBSSolver", "CBSStats", "CTNode", "CompiledConstraints", "Conflict", "Constraint",
+    "AUTO_CASCADE", "AUTO_SEARCH_AGENTS", "CARDINAL", "CBSResult", "CBSSolver", "CBSStats", "CTNode", "CascadeStage",
+    "CompiledConstraints", "ConfigurationStats", "Conflict", "Constraint",
     "ConstraintSet", "DEFAULT_MEMORY_LIMIT_MB", "DEFAULT_MERGE_THRESHOLD", "DeadlineConstraint", "EDGE", "EMPTY",
     "EdgeConstraint", "FOREVER", "GridInstance",
-    "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "NON_CARDINAL", "PROXIMITY", "Proximity",
-    "RangeConstraint", "SEMI_CARDINAL", "SPREAD_MODES", "STATUSES", "ScenAgent", "TARGET", "TIME_MODELS",
-    "UNREACHABLE", "VERTEX",
+    "GridMap", "HEURISTICS", "LengthConstraint", "MapfInstance", "MapfResult", "NON_CARDINAL", "PROXIMITY",
+    "PrioritizedStats", "Proximity", "RangeConstraint", "RepairStats", "SEMI_CARDINAL", "SOLVERS", "SPREAD_MODES",
+    "STATUSES", "ScenAgent", "SolverConfig", "StepperStats", "TARGET", "TIME_MODELS", "UNREACHABLE", "VERTEX",
     "VertexConstraint", "compile_constraints", "grid_graph", "integer_durations", "joint_feasible", "load_instance",
-    "load_map", "load_scen", "solve_cbs", "solve_lacam", "solve_lns", "solve_pibt", "solve_prioritized",
-    "validate",
+    "load_map", "load_scen", "register_solver", "solve", "solve_cbs", "solve_lacam", "solve_lns", "solve_pibt",
+    "solve_prioritized", "validate",
 ]

@@ -8,7 +8,10 @@ budgets; only the time differs.
 - :func:`sipp_durative`: the safe-interval search of :func:`~agents.search.mapf.sipp.sipp`
   under the durative time model (about 20 times faster on a 6000-node buffer graph);
 - :func:`reaches`: whether a node reaches another through open nodes, the test of
-  :func:`~agents.search.mapf.prioritized.release_order`.
+  :func:`~agents.search.mapf.prioritized.release_order`;
+- :func:`block_ranges`, :func:`drop_holds`, :func:`refresh_intervals`: the bookkeeping of
+  :class:`~agents.search.mapf.sipp.ArrayIntervalTable` (blocked time ranges per node in linked
+  lists of entries, and the safe intervals of the nodes they changed).
 """
 from __future__ import annotations
 
@@ -143,11 +146,148 @@ def _reaches_py(indptr: np.ndarray, targets: np.ndarray, open_: np.ndarray, s: i
     return False
 
 
+def _block_ranges_py(events: np.ndarray, forever: int, agent: int, hold: int, reach_ptr: np.ndarray,
+                     reach_idx: np.ndarray, head: np.ndarray, e_first: np.ndarray, e_last: np.ndarray,
+                     e_agent: np.ndarray, e_hold: np.ndarray, e_next: np.ndarray, top: int, dirty: np.ndarray,
+                     dirty_list: np.ndarray, n_dirty: int) -> Tuple[int, int]:
+    """Block what an agent following ``events`` (rows ``(node, time)``, durative time) occupies, then
+    parked at its last node from its last time to ``forever``, at every node of each node's reach
+    (``reach_idx[reach_ptr[u]:reach_ptr[u + 1]]``: the node and those near it).
+
+    A hold is one row ``(node, last)``: the node is blocked during ``0 .. last``. Each blocked range
+    becomes an entry ``(first, last, agent, hold)`` at the head of the node's list (``head``,
+    ``e_next``; entries from ``top`` on are free, and the caller makes room). Nodes whose list
+    changed are flagged in ``dirty`` and listed in ``dirty_list``. Returns ``(top, n_dirty)``.
+    """
+    m = events.shape[0]
+    for i in range(m):
+        u = events[i, 0]
+        if hold:
+            first, last = 0, events[i, 1]
+        elif i + 1 < m:
+            first, last = events[i, 1], events[i + 1, 1] - 1
+        else:
+            first, last = events[i, 1], forever
+        for side in range(2):
+            x_node = u
+            if side == 1:  # a move also occupies the node it goes to, from when it leaves
+                if hold or i + 1 >= m or events[i + 1, 0] == u:
+                    break
+                x_node = events[i + 1, 0]
+            for r in range(reach_ptr[x_node], reach_ptr[x_node + 1]):
+                x = reach_idx[r]
+                e = top
+                top += 1
+                e_first[e] = first
+                e_last[e] = last
+                e_agent[e] = agent
+                e_hold[e] = hold
+                e_next[e] = head[x]
+                head[x] = e
+                if not dirty[x]:
+                    dirty[x] = 1
+                    dirty_list[n_dirty] = x
+                    n_dirty += 1
+    return top, n_dirty
+
+
+def _drop_holds_py(node: int, agent: int, reach_ptr: np.ndarray, reach_idx: np.ndarray, head: np.ndarray,
+                   e_agent: np.ndarray, e_hold: np.ndarray, e_next: np.ndarray, dirty: np.ndarray,
+                   dirty_list: np.ndarray, n_dirty: int) -> int:
+    """Unlink ``agent``'s hold entries from the lists of the reach of ``node`` (see
+    :func:`block_ranges`); returns the new ``n_dirty``."""
+    for r in range(reach_ptr[node], reach_ptr[node + 1]):
+        x = reach_idx[r]
+        prev = -1
+        e = head[x]
+        while e >= 0:
+            nxt = e_next[e]
+            if e_agent[e] == agent and e_hold[e]:
+                if prev < 0:
+                    head[x] = nxt
+                else:
+                    e_next[prev] = nxt
+            else:
+                prev = e
+            e = nxt
+        if not dirty[x]:
+            dirty[x] = 1
+            dirty_list[n_dirty] = x
+            n_dirty += 1
+    return n_dirty
+
+
+def _refresh_intervals_py(dirty_list: np.ndarray, begin: int, n_dirty: int, dirty: np.ndarray, head: np.ndarray,
+                          e_first: np.ndarray, e_last: np.ndarray, e_next: np.ndarray, iv_lo: np.ndarray,
+                          iv_hi: np.ndarray, iv_n: np.ndarray, forever: int) -> Tuple[int, int]:
+    """The safe intervals (the maximal ranges no entry blocks, see :func:`block_ranges`) of the
+    nodes ``dirty_list[begin:n_dirty]``, written to ``iv_lo``, ``iv_hi``, ``iv_n`` and unflagged in
+    ``dirty``. Returns ``(n_dirty, 0)`` when done, or ``(i, m)`` where node ``dirty_list[i]`` needs
+    ``m`` intervals, more than ``iv_lo`` has room for (the caller grows it and goes on from ``i``)."""
+    cap = iv_lo.shape[1]
+    for i in range(begin, n_dirty):
+        x = dirty_list[i]
+        count = 0
+        e = head[x]
+        while e >= 0:
+            count += 1
+            e = e_next[e]
+        firsts = np.empty(count, dtype=np.int64)
+        lasts = np.empty(count, dtype=np.int64)
+        e = head[x]
+        j = 0
+        while e >= 0:
+            firsts[j] = e_first[e]
+            lasts[j] = e_last[e]
+            j += 1
+            e = e_next[e]
+        order = np.argsort(firsts)
+        # count the intervals first, so that nothing is written where there is no room
+        m = 0
+        nxt = 0
+        for j in range(count):
+            a = firsts[order[j]]
+            b = lasts[order[j]]
+            if a > nxt:
+                m += 1
+            if b + 1 > nxt:
+                nxt = b + 1
+        if nxt <= forever:
+            m += 1
+        if m > cap:
+            return i, m
+        m = 0
+        nxt = 0
+        for j in range(count):
+            a = firsts[order[j]]
+            b = lasts[order[j]]
+            if a > nxt:
+                iv_lo[x, m] = nxt
+                iv_hi[x, m] = a - 1
+                m += 1
+            if b + 1 > nxt:
+                nxt = b + 1
+        if nxt <= forever:
+            iv_lo[x, m] = nxt
+            iv_hi[x, m] = forever
+            m += 1
+        iv_n[x] = m
+        dirty[x] = 0
+    return n_dirty, 0
+
+
 if _numba is not None:  # pragma: no branch
     sipp_durative = _numba.njit(cache=True, nogil=True)(_sipp_durative_py)
     reaches = _numba.njit(cache=True, nogil=True)(_reaches_py)
+    block_ranges = _numba.njit(cache=True, nogil=True)(_block_ranges_py)
+    drop_holds = _numba.njit(cache=True, nogil=True)(_drop_holds_py)
+    refresh_intervals = _numba.njit(cache=True, nogil=True)(_refresh_intervals_py)
 else:  # pragma: no cover - depends on the environment
     sipp_durative = _sipp_durative_py
     reaches = _reaches_py
+    block_ranges = _block_ranges_py
+    drop_holds = _drop_holds_py
+    refresh_intervals = _refresh_intervals_py
 
-__all__ = ["AVAILABLE", "ENABLED", "active", "reaches", "sipp_durative"]
+__all__ = ["AVAILABLE", "ENABLED", "active", "block_ranges", "drop_holds", "reaches", "refresh_intervals",
+           "sipp_durative"]

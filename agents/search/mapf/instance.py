@@ -32,11 +32,14 @@ class Proximity:
     ``node_dist`` is a dense ``(N, N)`` matrix or a callable ``node_dist(u, v) -> float`` (it
     is evaluated once for every ordered pair, so prefer a matrix on large graphs). The
     distance may be asymmetric (e.g. a learned critic); two nodes are *near* when either
-    direction is below the radius.
+    direction is below the radius. ``exempt`` lists ranges ``(lo, hi)`` of nodes ``lo .. hi - 1``
+    that are never near one another (e.g. agents' starts that the environment places side by side),
+    whatever their distance.
     """
 
     node_dist: Union[np.ndarray, Callable[[int, int], float]]
     radius: float
+    exempt: Tuple[Tuple[int, int], ...] = ()
 
     def near_matrix(self, n_nodes: int) -> np.ndarray:
         """Boolean ``(N, N)`` matrix, symmetric, False on the diagonal: which node pairs are near."""
@@ -57,6 +60,8 @@ class Proximity:
         rows, cols = np.nonzero(near)
         near[cols, rows] = True  # either direction (few pairs: no pass over the transposed matrix)
         np.fill_diagonal(near, False)
+        for lo, hi in self.exempt:
+            near[lo:hi, lo:hi] = False
         return near
 
 
@@ -280,8 +285,7 @@ class MapfInstance:
             self.h_array = np.where(np.isfinite(dist), dist, UNREACHABLE).astype(np.int64)
         else:
             self.h_array = np.zeros((0, n), dtype=np.int64)
-        #: per agent, the true distance (in steps) from every node to its goal.
-        self.h: List[List[int]] = [row.tolist() for row in self.h_array]
+        self._h: Optional[List[List[int]]] = None
         self._pred: Optional[List[List[int]]] = None
         self._must_pass: Dict[Tuple[int, int], frozenset] = {}
         self._dist_to: Dict[Tuple[int, frozenset], List[int]] = {}
@@ -291,6 +295,14 @@ class MapfInstance:
         self._moves_csr: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
 
     # ------------------------------------------------------------------ graph helpers
+    @property
+    def h(self) -> List[List[int]]:
+        """Per agent, the true distance (in steps) from every node to its goal (:attr:`h_array` as
+        lists, made on first use: the Python searches index them fastest)."""
+        if self._h is None:
+            self._h = [row.tolist() for row in self.h_array]
+        return self._h
+
     @property
     def pred(self) -> List[List[int]]:
         """Predecessor lists (waits excluded)."""
@@ -367,7 +379,7 @@ class MapfInstance:
     # ------------------------------------------------------------------ quick facts
     def unreachable_agents(self) -> List[int]:
         """Agents whose goal cannot be reached from their start."""
-        return [i for i in range(self.n_agents) if self.h[i][self.starts[i]] >= UNREACHABLE]
+        return [i for i in range(self.n_agents) if self.h_array[i, self.starts[i]] >= UNREACHABLE]
 
     def is_near(self, u: int, v: int) -> bool:
         """Whether agents at ``u != v`` would be in proximity conflict."""

@@ -77,6 +77,7 @@ import heapq
 import random
 import sys
 from collections import deque
+from dataclasses import dataclass
 from typing import Deque, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -85,10 +86,10 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, dijk
 from .instance import UNREACHABLE, MapfInstance
 from .pibt import _overlap
 from .prioritized import SolveRun, check_common_options, no_plan_reason, plan_result
-from .result import CBSResult
+from .result import MapfResult
 from .sipp import BudgetExceeded, Events
 
-__all__ = ["DEFAULT_LACAM_EXPANSION_LIMIT", "solve_lacam"]
+__all__ = ["ConfigurationStats", "DEFAULT_LACAM_EXPANSION_LIMIT", "solve_lacam"]
 
 #: default ``expansion_limit``: the work of one solve, counted as agents placed and candidate moves
 #: examined by the successor generator, low-level constraints made and edges relaxed by the repair
@@ -96,6 +97,18 @@ __all__ = ["DEFAULT_LACAM_EXPANSION_LIMIT", "solve_lacam"]
 DEFAULT_LACAM_EXPANSION_LIMIT = 20_000_000
 #: low-level option "stay at the goal for good" (the agent finishes)
 FINISH = -1
+
+
+@dataclass
+class ConfigurationStats:
+    """Statistics of one configuration search (its work and seconds are the result's)."""
+
+    #: high-level nodes (joint configurations) made
+    configurations: int = 0
+    #: successor generations, one per low-level constraint set taken up
+    generations: int = 0
+    #: calls of the successor generator
+    generator_calls: int = 0
 
 
 def _constraints(c: tuple) -> List[Tuple[int, int]]:
@@ -1086,8 +1099,9 @@ class _Search:
 
 
 def solve_lacam(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_LACAM_EXPANSION_LIMIT,
-                time_limit: Optional[float] = None, seed: int = 0, anytime: bool = True) -> CBSResult:
-    """Search the agents' joint configurations in the manner of LaCAM*; a :class:`CBSResult`.
+                time_limit: Optional[float] = None, seed: int = 0, anytime: bool = True) -> MapfResult:
+    """Search the agents' joint configurations in the manner of LaCAM*; a
+    :class:`~agents.search.mapf.result.MapfResult` (``solver`` ``"lacam"``).
 
     Guarantees: complete (with an unlimited budget it finds a plan where one exists, and reports
     ``"infeasible"`` where none does, once the configurations reachable from the starts are
@@ -1115,20 +1129,18 @@ def solve_lacam(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_
         bound), ``"suboptimal"`` (a plan, not proven optimal), ``"timeout"`` (the budget ended
         before any plan; the message says which limit) or ``"infeasible"`` (an agent cannot reach
         its goal even alone, two starts or two goals are within the proximity radius of each
-        other, or the search exhausted every reachable configuration). Statistics: high-level
-        nodes made (``hl_generated``), successor generations (``hl_expanded``, one per low-level
-        constraint set taken up), the work counted against ``expansion_limit`` (``ll_expanded``)
-        and the generator's calls (``ll_calls``).
+        other, or the search exhausted every reachable configuration). ``work``: the work counted
+        against ``expansion_limit``; ``stats``: a :class:`ConfigurationStats`.
     """
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ValueError(f"seed must be an integer, got {seed!r}")
     check_common_options(expansion_limit, time_limit, 0)
-    run = SolveRun(expansion_limit, time_limit)
+    run = SolveRun(expansion_limit, time_limit, "lacam", ConfigurationStats())
     k = inst.n_agents
     reason = (_overlap(inst, inst.starts, "start") or _overlap(inst, inst.goals, "goal")
               or no_plan_reason(inst, 0))
     if reason is not None:
-        return run.finish(inst, CBSResult("infeasible", message=reason))
+        return run.finish(inst, MapfResult("infeasible", message=reason))
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
     rng = random.Random(seed)
     gen: Union[_UnitGen, _OccGen]
@@ -1153,21 +1165,21 @@ def solve_lacam(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_
     finally:
         sys.setrecursionlimit(limit)
     stats = run.stats
-    stats.hl_generated = search.generated
-    stats.hl_expanded = search.expanded
-    stats.ll_calls = gen.calls
+    stats.configurations = search.generated
+    stats.generations = search.expanded
+    stats.generator_calls = gen.calls
     plan = search.plan
     where = f"{search.generated} configurations, {search.expanded} successor generations"
     if plan is None:
         if exhausted:
-            return run.finish(inst, CBSResult("infeasible", lower_bound=lb, message=(
+            return run.finish(inst, MapfResult("infeasible", lower_bound=lb, message=(
                 f"no plan exists: the search exhausted every configuration reachable from the starts ({where})")))
-        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+        return run.finish(inst, MapfResult("timeout", lower_bound=lb, message=(
             f"{stopped} reached before a plan was found (configuration search, {where})")))
     paths = search.paths(plan)
     if exhausted:
         soc = sum(p[-1][1] for p in paths)
-        res = CBSResult("optimal", paths, soc, max((p[-1][1] for p in paths), default=0), soc,
+        res = MapfResult("optimal", paths, soc, max((p[-1][1] for p in paths), default=0), soc,
                         message=f"proven optimal: no configuration below its cost is left ({where})")
         return run.finish(inst, res)
     why = f"{stopped} reached" if stopped else "first solution"

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import random
 from collections import deque
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Set
 
 from .conflict_table import ConflictTable, occupancy, soft_sipp
@@ -37,17 +38,29 @@ from .prioritized import (
     plan_in_order,
     plan_result,
 )
-from .result import CBSResult
+from .result import MapfResult
 from .sipp import BudgetExceeded, Events
 from .solver import DEFAULT_JOINT_CHECK_STATES
 
-__all__ = ["ConflictTable", "DEFAULT_NEIGHBORHOOD_SIZE", "DEFAULT_REPAIR_EXPANSION_LIMIT", "direct_path",
+__all__ = ["ConflictTable", "DEFAULT_NEIGHBORHOOD_SIZE", "DEFAULT_REPAIR_EXPANSION_LIMIT", "RepairStats", "direct_path",
            "occupancy", "soft_sipp", "solve_lns"]
 
 #: default expansions of one repair solve (initial plan and repair together)
 DEFAULT_REPAIR_EXPANSION_LIMIT = 2_000_000
 #: default number of agents re-planned together
 DEFAULT_NEIGHBORHOOD_SIZE = 4
+
+
+@dataclass
+class RepairStats:
+    """Statistics of one large-neighbourhood repair (its work and seconds are the result's)."""
+
+    #: pairs of agents in conflict in the initial plan
+    initial_conflicts: int = 0
+    #: neighbourhoods re-planned
+    neighbourhoods: int = 0
+    #: neighbourhoods whose new paths were kept
+    kept: int = 0
 
 
 def direct_path(inst: MapfInstance, agent: int) -> Events:
@@ -108,8 +121,10 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
               time_limit: Optional[float] = None, seed: int = 0,
               neighborhood_size: int = DEFAULT_NEIGHBORHOOD_SIZE, call_limit: Optional[int] = None,
               order: Optional[Sequence[int]] = None, start_hold: Optional[int] = None,
-              joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
-    """Large-neighbourhood repair of a prioritised plan that may hold conflicts; a :class:`CBSResult`.
+              joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> MapfResult:
+    """Large-neighbourhood repair of a prioritised plan that may hold conflicts; a
+    :class:`~agents.search.mapf.result.MapfResult` (``solver`` ``"lns"``, ``work``: search expansions,
+    ``stats``: a :class:`RepairStats`).
 
     Args:
         inst: the instance (either time model, with or without proximity).
@@ -145,11 +160,11 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
     if start_hold < 0:
         raise ValueError(f"start_hold must be >= 0, got {start_hold!r}")
     check_common_options(expansion_limit, time_limit, joint_check_states)
-    run = SolveRun(expansion_limit, time_limit)
+    run = SolveRun(expansion_limit, time_limit, "lns", RepairStats())
     k = inst.n_agents
     reason = no_plan_reason(inst, joint_check_states)
     if reason is not None:
-        return run.finish(inst, CBSResult("infeasible", message=reason))
+        return run.finish(inst, MapfResult("infeasible", message=reason))
     first = list(order) if order is not None else initial_order(inst)
     if sorted(first) != list(range(k)):
         raise ValueError(f"order must be a permutation of the {k} agents")
@@ -168,11 +183,11 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
         for i in range(k):
             conf[i] = table.conflicts(table.paths[i], i)
         pairs = sum(len(c) for c in conf) // 2
-        stats.hl_generated = pairs  # conflicting pairs of the initial plan
+        stats.initial_conflicts = pairs
         phase = "repair"
         while pairs:
             run.check_limits()
-            stats.hl_expanded += 1
+            stats.neighbourhoods += 1
             group = _neighbourhood(rng, inst, conf, table, neighborhood_size)
             before = {frozenset((i, j)) for i in group for j in conf[i]}
             old = {i: table.remove(i) for i in group}
@@ -202,7 +217,7 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
                     for j in c:
                         conf[j].add(i)
                 pairs += after - len(before)
-                stats.ll_calls += 1  # neighbourhoods kept
+                stats.kept += 1
             else:
                 for i in new_conf:
                     table.remove(i)
@@ -212,14 +227,14 @@ def solve_lns(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_RE
                     for j in conf[i]:
                         conf[j].add(i)
     except BudgetExceeded:
-        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+        return run.finish(inst, MapfResult("timeout", lower_bound=lb, message=(
             f"expansion limit of {expansion_limit} reached (large-neighbourhood repair, {phase}"
             f"{'' if phase == 'initial plan' else f'; {pairs} pairs of agents still in conflict'})")))
     except TimeoutError:
-        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+        return run.finish(inst, MapfResult("timeout", lower_bound=lb, message=(
             f"time limit of {time_limit:g} s reached (large-neighbourhood repair, {phase}"
             f"{'' if phase == 'initial plan' else f'; {pairs} pairs of agents still in conflict'})")))
     full = [table.paths[i] for i in range(k)]
     return run.finish(inst, plan_result(full, lb, (
-        f"large-neighbourhood repair: {stats.hl_generated} pairs of agents in conflict in the initial plan, "
-        f"{stats.hl_expanded} neighbourhoods re-planned; cost not bounded")))
+        f"large-neighbourhood repair: {stats.initial_conflicts} pairs of agents in conflict in the initial plan, "
+        f"{stats.neighbourhoods} neighbourhoods re-planned; cost not bounded")))

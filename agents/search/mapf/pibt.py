@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import random
 import sys
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
@@ -60,11 +61,11 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, dijk
 
 from .instance import UNREACHABLE, MapfInstance
 from .prioritized import SolveRun, check_common_options, no_plan_reason, plan_result
-from .result import CBSResult
+from .result import MapfResult
 from .sipp import BudgetExceeded, Events
 from .solver import DEFAULT_JOINT_CHECK_STATES
 
-__all__ = ["DEFAULT_PIBT_EXPANSION_LIMIT", "solve_pibt"]
+__all__ = ["DEFAULT_PIBT_EXPANSION_LIMIT", "StepperStats", "solve_pibt"]
 
 #: default candidate moves examined over one solve
 DEFAULT_PIBT_EXPANSION_LIMIT = 5_000_000
@@ -77,6 +78,18 @@ DEFAULT_PATIENCE = 5
 DEFAULT_STALL_MOVES = 100
 #: default ``restarts``
 DEFAULT_RESTARTS = 20
+
+
+@dataclass
+class StepperStats:
+    """Statistics of one priority inheritance stepper solve (its work and seconds are the result's)."""
+
+    #: time steps of the last run
+    steps: int = 0
+    #: runs started again from the starts
+    restarts: int = 0
+    #: moves started in the last run
+    moves: int = 0
 
 
 class _Stepper:
@@ -411,8 +424,10 @@ def _overlap(inst: MapfInstance, nodes: Tuple[int, ...], what: str) -> Optional[
 def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_PIBT_EXPANSION_LIMIT,
                time_limit: Optional[float] = None, seed: int = 0, patience: int = DEFAULT_PATIENCE,
                stall_moves: int = DEFAULT_STALL_MOVES, restarts: int = DEFAULT_RESTARTS,
-               joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
-    """Step all agents together by priority inheritance with backtracking; a :class:`CBSResult`.
+               joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> MapfResult:
+    """Step all agents together by priority inheritance with backtracking; a
+    :class:`~agents.search.mapf.result.MapfResult` (``solver`` ``"pibt"``, ``work``: candidate moves
+    examined, ``stats``: a :class:`StepperStats`; its lower bound is the sum of the agents' distances).
 
     Args:
         inst: the instance (either time model, with or without proximity).
@@ -447,12 +462,12 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
     if isinstance(stall_moves, bool) or not isinstance(stall_moves, int) or stall_moves < 1:
         raise ValueError(f"stall_moves must be an integer >= 1, got {stall_moves!r}")
     check_common_options(expansion_limit, time_limit, joint_check_states)
-    run = SolveRun(expansion_limit, time_limit)
+    run = SolveRun(expansion_limit, time_limit, "pibt", StepperStats())
     k = inst.n_agents
     reason = (_overlap(inst, inst.starts, "start") or _overlap(inst, inst.goals, "goal")
               or no_plan_reason(inst, joint_check_states))
     if reason is not None:
-        return run.finish(inst, CBSResult("infeasible", message=reason))
+        return run.finish(inst, MapfResult("infeasible", message=reason))
     lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
     stall = stall_moves * (1 if inst.unit else inst.max_duration)
     seeds = random.Random(seed)
@@ -461,6 +476,10 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
         sys.setrecursionlimit(4 * k + 100)
     attempt = 0
     goals = inst.goals
+
+    def counted(st: _Stepper) -> None:
+        run.stats.steps, run.stats.restarts, run.stats.moves = st.step, attempt, st.moves
+
     try:
         while True:
             st = _Stepper(inst, seed if attempt == 0 else seeds.getrandbits(32), run, patience)
@@ -477,7 +496,8 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
             else:
                 break  # every agent at its goal
             if attempt == restarts:
-                return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+                counted(st)
+                return run.finish(inst, MapfResult("timeout", lower_bound=lb, message=(
                     f"priority inheritance stepper: {attempt + 1} runs stalled (the last with {best} of {k} "
                     f"agents at their goals, none more for {stall} steps)")))
             attempt += 1
@@ -485,13 +505,12 @@ def solve_pibt(inst: MapfInstance, *, expansion_limit: Optional[int] = DEFAULT_P
         home = sum(1 for a in range(k) if st.target[a] < 0 and st.pos[a] == goals[a])
         which = (f"expansion limit of {expansion_limit}" if isinstance(exc, BudgetExceeded)
                  else f"time limit of {time_limit:g} s")
-        return run.finish(inst, CBSResult("timeout", lower_bound=lb, message=(
+        counted(st)
+        return run.finish(inst, MapfResult("timeout", lower_bound=lb, message=(
             f"{which} reached (priority inheritance stepper, run {attempt + 1}, step {st.step}; "
             f"{home} of {k} agents at their goals)")))
     finally:
         sys.setrecursionlimit(limit)
-    run.stats.hl_expanded = st.step
-    run.stats.hl_generated = attempt  # restarts
-    run.stats.ll_calls = st.moves
+    counted(st)
     return run.finish(inst, plan_result(st.paths(), lb, (
         f"priority inheritance stepper: {st.step} steps, {st.moves} moves, {attempt} restarts; cost not bounded")))

@@ -26,7 +26,8 @@ from __future__ import annotations
 import collections
 import heapq
 import time as _time
-from typing import Dict, List, Optional, Sequence, Set, Tuple
+from dataclasses import dataclass
+from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar
 
 import numpy as np
 from scipy.sparse.csgraph import breadth_first_order
@@ -35,8 +36,8 @@ from . import compiled
 from .conflict_table import ConflictTable, soft_sipp
 from .feasibility import infeasible_component
 from .instance import UNREACHABLE, MapfInstance
-from .result import CBSResult, CBSStats
-from .sipp import FOREVER, BudgetExceeded, Events, IntervalTable, sipp
+from .result import MapfResult
+from .sipp import FOREVER, BudgetExceeded, Events, interval_table, sipp
 from .solver import DEFAULT_JOINT_CHECK_STATES
 
 #: default SIPP expansions of one solve, over all agents and restarts
@@ -49,22 +50,36 @@ DEFAULT_DEFERRALS = 3
 DEFAULT_START_HOLD_MOVES = 6
 
 
-class SolveRun:
+@dataclass
+class PrioritizedStats:
+    """Statistics of one prioritised planning solve (its work and seconds are the result's)."""
+
+    #: priority orders planned (the first one and each restart)
+    orders: int = 0
+
+
+S = TypeVar("S")
+
+
+class SolveRun(Generic[S]):
     """The counters and limits of one solve: expansions so far, the expansion budget, the deadline.
 
     Args:
         expansion_limit: expansions over the whole solve (``None``: no limit).
         time_limit: wall-clock seconds from now, a safety net (``None``: none).
+        solver: the solver's name, which its results carry.
+        stats: the solver's own statistics, filled as it goes and attached to its result.
     """
 
-    def __init__(self, expansion_limit: Optional[int], time_limit: Optional[float]) -> None:
+    def __init__(self, expansion_limit: Optional[int], time_limit: Optional[float], solver: str, stats: S) -> None:
         self.t0 = _time.perf_counter()
         #: expansions so far (a one-element list, shared with the low-level searches)
         self.counter = [0]
         self.budget = expansion_limit
         #: ``time.perf_counter()`` past which the solve stops (``None``: never)
         self.deadline = None if time_limit is None else self.t0 + time_limit
-        self.stats = CBSStats()
+        self.solver = solver
+        self.stats = stats
 
     def check_limits(self) -> None:
         """Raise ``TimeoutError`` past the deadline, :class:`~agents.search.mapf.sipp.BudgetExceeded`
@@ -74,10 +89,12 @@ class SolveRun:
         if self.budget is not None and self.counter[0] > self.budget:
             raise BudgetExceeded
 
-    def finish(self, inst: MapfInstance, res: CBSResult) -> CBSResult:
-        """``res`` with this run's statistics (expansions, seconds) and the instance's time model."""
-        self.stats.ll_expanded = self.counter[0]
-        self.stats.runtime_s = _time.perf_counter() - self.t0
+    def finish(self, inst: MapfInstance, res: MapfResult) -> MapfResult:
+        """``res`` with this run's work (expansions), seconds, solver name, statistics and the
+        instance's time model."""
+        res.work = self.counter[0]
+        res.runtime_s = _time.perf_counter() - self.t0
+        res.solver = self.solver
         res.stats = self.stats
         res.time_model = inst.time_model
         return res
@@ -106,21 +123,21 @@ def no_plan_reason(inst: MapfInstance, joint_check_states: int) -> Optional[str]
     exhaustively where it has at most ``joint_check_states`` joint configurations; 0: not
     searched). ``None``: no proof found (a plan may or may not exist)."""
     for i in range(inst.n_agents):
-        if inst.h[i][inst.starts[i]] >= UNREACHABLE:
+        if inst.h_array[i, inst.starts[i]] >= UNREACHABLE:
             return f"agent {i} cannot reach its goal from its start"
     if joint_check_states > 0:
         return infeasible_component(inst, joint_check_states)
     return None
 
 
-def plan_result(paths: List[Events], lower_bound: int, message: str) -> CBSResult:
+def plan_result(paths: List[Events], lower_bound: int, message: str) -> MapfResult:
     """The result of a conflict-free plan: status ``"optimal"`` where its sum of costs equals
     ``lower_bound`` (then the message says so), else ``"suboptimal"`` with ``message``."""
     costs = [p[-1][1] for p in paths]
     soc = sum(costs)
     status = "optimal" if soc == lower_bound else "suboptimal"
     msg = "cost equals the lower bound" if status == "optimal" else message
-    return CBSResult(status, paths, soc, max(costs, default=0), lower_bound, message=msg)
+    return MapfResult(status, paths, soc, max(costs, default=0), lower_bound, message=msg)
 
 
 def start_blockers(inst: MapfInstance) -> List[List[int]]:
@@ -141,8 +158,8 @@ def initial_order(inst: MapfInstance) -> List[int]:
     agent's start comes after that agent (it could not park before the other has left).
     Agents on a cycle of such precedences keep the far-first order among themselves, last."""
     k = inst.n_agents
-    h = inst.h
-    rank = sorted(range(k), key=lambda i: (-h[i][inst.starts[i]], i))
+    to_go = inst.h_array[np.arange(k), list(inst.starts)].tolist() if k else []
+    rank = sorted(range(k), key=lambda i: (-to_go[i], i))
     pos = {a: r for r, a in enumerate(rank)}
     after: List[List[int]] = [[] for _ in range(k)]
     waiting = [0] * k
@@ -245,7 +262,7 @@ def plan_in_order(inst: MapfInstance, order: Sequence[int], counter: List[int],
     """
     if isinstance(deferrals, bool) or not isinstance(deferrals, int) or deferrals < 0:
         raise ValueError(f"deferrals must be an integer >= 0, got {deferrals!r}")
-    table = IntervalTable(inst)
+    table = interval_table(inst)
     paths: List[Optional[Events]] = [None] * inst.n_agents
     for i in order:
         table.hold(i, inst.starts[i], FOREVER)
@@ -312,8 +329,9 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
                       time_limit: Optional[float] = None,
                       order: Optional[Sequence[int]] = None,
                       start_hold: Optional[int] = None,
-                      joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> CBSResult:
-    """Prioritised planning with SIPP and priority restarts; a :class:`CBSResult`.
+                      joint_check_states: int = DEFAULT_JOINT_CHECK_STATES) -> MapfResult:
+    """Prioritised planning with SIPP and priority restarts; a :class:`~agents.search.mapf.result.MapfResult`
+    (``solver`` ``"prioritized"``, ``work``: SIPP expansions, ``stats``: a :class:`PrioritizedStats`).
 
     Args:
         inst: the instance (either time model, with or without proximity).
@@ -347,16 +365,16 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
     if restarts < 0:
         raise ValueError(f"restarts must be >= 0, got {restarts!r}")
     check_common_options(expansion_limit, time_limit, joint_check_states)
-    run = SolveRun(expansion_limit, time_limit)
+    run = SolveRun(expansion_limit, time_limit, "prioritized", PrioritizedStats())
     stats = run.stats
     k = inst.n_agents
 
-    def finish(res: CBSResult) -> CBSResult:
+    def finish(res: MapfResult) -> MapfResult:
         return run.finish(inst, res)
 
     reason = no_plan_reason(inst, joint_check_states)
     if reason is not None:
-        return finish(CBSResult("infeasible", message=reason))
+        return finish(MapfResult("infeasible", message=reason))
     if order is not None:
         cur = list(order)
         if sorted(cur) != list(range(k)):
@@ -367,18 +385,18 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
         if cur == second:
             second = None
     counter, deadline = run.counter, run.deadline
-    lb = sum(inst.h[i][inst.starts[i]] for i in range(k))
+    lb = int(inst.h_array[np.arange(k), list(inst.starts)].sum()) if k else 0
     failed: Optional[int] = None
     for attempt in range(restarts + 1):
-        stats.hl_expanded = attempt + 1
+        stats.orders = attempt + 1
         try:
             paths, failed = plan_in_order(inst, cur, counter, expansion_limit, deadline, start_hold,
                                           deferrals=DEFAULT_DEFERRALS)
         except BudgetExceeded:
-            return finish(CBSResult("timeout", lower_bound=lb,
+            return finish(MapfResult("timeout", lower_bound=lb,
                                     message=f"expansion limit of {expansion_limit} reached (prioritised planning)"))
         except TimeoutError:
-            return finish(CBSResult("timeout", lower_bound=lb,
+            return finish(MapfResult("timeout", lower_bound=lb,
                                     message=f"time limit of {time_limit:g} s reached (prioritised planning)"))
         if paths is not None:
             full = [p for p in paths if p is not None]
@@ -389,10 +407,10 @@ def solve_prioritized(inst: MapfInstance, *, restarts: int = 20,
             continue
         if cur[0] == failed:
             # planning is deterministic: the same order would fail the same way again
-            return finish(CBSResult("timeout", lower_bound=lb,
+            return finish(MapfResult("timeout", lower_bound=lb,
                                     message=f"prioritised planning failed {attempt + 1} times; agent {failed} fails "
                                             "even when planned first, so a restart would repeat the last attempt"))
         cur.remove(failed)
         cur.insert(0, failed)
-    return finish(CBSResult("timeout", lower_bound=lb,
+    return finish(MapfResult("timeout", lower_bound=lb,
                             message=f"prioritised planning failed {restarts + 1} times (last: agent {failed})"))

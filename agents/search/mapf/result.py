@@ -1,22 +1,28 @@
-"""What a CBS solve returns: :class:`CBSResult` (status, paths, costs, bounds) and :class:`CBSStats`."""
+"""What a MAPF solve returns: :class:`MapfResult`, the one result type of every solver, and
+:class:`CBSStats`, the statistics of a CBS / ECBS search.
+
+Every solver fills the fields of :class:`MapfResult` (status, paths, costs, a lower bound where it
+has one, the work counted against its budget, the seconds it ran, its name); what only one solver
+counts goes into :attr:`MapfResult.stats`, a statistics object of that solver's own type
+(:class:`CBSStats` for CBS and ECBS).
+"""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, is_dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
-#: Possible values of :attr:`CBSResult.status`.
+#: Possible values of :attr:`MapfResult.status`.
 STATUSES = ("optimal", "suboptimal", "timeout", "infeasible")
 
 
 @dataclass
 class CBSStats:
-    """Search statistics of one solve."""
+    """Search statistics of one CBS / ECBS solve (its work and seconds are :class:`MapfResult`'s)."""
 
     hl_expanded: int = 0
     hl_generated: int = 0
-    ll_expanded: int = 0
+    #: low-level searches run
     ll_calls: int = 0
-    runtime_s: float = 0.0
     mdds: int = 0
     pair_searches: int = 0
     pair_reuses: int = 0
@@ -43,23 +49,32 @@ class CBSStats:
 
 
 @dataclass
-class CBSResult:
-    """The outcome of a CBS solve.
+class MapfResult:
+    """The outcome of one solve, whichever solver made it.
 
     Attributes:
-        status: ``"optimal"``, ``"suboptimal"`` (ECBS; cost within ``suboptimality`` x optimum),
-            ``"timeout"`` (time, memory or node limit reached first) or ``"infeasible"`` (proved).
+        status: ``"optimal"`` (cost proven optimal), ``"suboptimal"`` (a plan, its cost not proven
+            optimal; ECBS: within ``suboptimality`` x optimum), ``"timeout"`` (a budget, the time or
+            the memory limit reached first, or an incomplete solver gave up) or ``"infeasible"`` (proved).
         paths: per agent, the timed path ``[(node, time), ...]``: the agent is at ``node`` at
             ``time``; one entry per time step under unit time; arrivals and each waiting step
             under the durative model (between two entries ``(u, t), (v, t + d)`` with ``u != v``
             the agent traverses the edge). The last entry is the final arrival at the goal, where
             the agent then stays. ``None`` unless solved.
-        soc: sum over agents of the final arrival times.
-        makespan: the latest final arrival time.
-        lower_bound: a proven lower bound on the optimal sum of costs (``None`` if unknown).
-        stats: search statistics.
-        message: why the search ended the way it did, in words.
+        soc: sum over agents of the final arrival times (``None`` unless solved).
+        makespan: the latest final arrival time (``None`` unless solved).
+        lower_bound: a proven lower bound on the optimal sum of costs: the search's bound (CBS, ECBS),
+            the sum of the agents' own distances (the other solvers), ``None`` where none is known.
+        message: why the solve ended the way it did, in words.
         time_model: ``"unit"`` or ``"durative"``.
+        solver: the name of the solver that made this result (the names of
+            :data:`agents.search.mapf.registry.SOLVERS`, or ``"single"`` for a lone agent's shortest path).
+        work: the work the solver counted against its budget, in its own unit (CBS / ECBS: low-level
+            expansions; prioritised planning and the repair: search expansions; the stepper: candidate
+            moves; the configuration search: its work units; 0 where nothing is counted).
+        runtime_s: wall-clock seconds of the solve.
+        stats: the solver's own statistics (:class:`CBSStats` for CBS / ECBS; see each solver), or
+            ``None``.
     """
 
     status: str
@@ -67,9 +82,12 @@ class CBSResult:
     soc: Optional[int] = None
     makespan: Optional[int] = None
     lower_bound: Optional[int] = None
-    stats: CBSStats = field(default_factory=CBSStats)
     message: str = ""
     time_model: str = "unit"
+    solver: str = ""
+    work: int = 0
+    runtime_s: float = 0.0
+    stats: Optional[Any] = None
 
     @property
     def solved(self) -> bool:
@@ -113,7 +131,7 @@ class CBSResult:
         return out
 
     def to_dict(self) -> dict:
-        """A JSON-friendly summary (paths included)."""
+        """A JSON-friendly summary (paths included; the solver's own statistics under ``"stats"``)."""
         d: Dict[str, Any] = {
             "status": self.status,
             "soc": self.soc,
@@ -121,7 +139,14 @@ class CBSResult:
             "lower_bound": self.lower_bound,
             "message": self.message,
             "time_model": self.time_model,
+            "solver": self.solver,
+            "work": self.work,
+            "runtime_s": self.runtime_s,
+            "stats": asdict(self.stats) if is_dataclass(self.stats) and not isinstance(self.stats, type) else None,
         }
-        d.update(asdict(self.stats))
         d["paths"] = None if self.paths is None else [[list(e) for e in p] for p in self.paths]
         return d
+
+
+#: The former name of :class:`MapfResult` (when only CBS returned it), kept for imports.
+CBSResult = MapfResult

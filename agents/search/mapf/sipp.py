@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import heapq
 from bisect import bisect_right
-from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar
+from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar, Union
 
 import numpy as np
 
@@ -70,27 +70,19 @@ class NodeRanges(Generic[C]):
             tuple([u] + near[u]) if near is not None else (u,) for u in range(n)]
         #: per node, its moves ``(v, duration)`` (waiting left out)
         self.out: List[List[Tuple[int, int]]] = [row[1:] for row in inst.succ_d]
-        #: the nodes whose ranges changed since a subclass last read them (``None``: not tracked)
-        self._dirty: Optional[Set[int]] = None
 
     def _block(self, agent: int, hold: bool, node: int, first: int, last: int) -> None:
         self._touched.setdefault((agent, hold), set()).add(node)
         entry = (first, last, agent, hold)
-        dirty = self._dirty
         for x in self._reach[node]:
             self._ranges[x].append(entry)
             self._cache[x] = None
-            if dirty is not None:
-                dirty.add(x)
 
     def _drop(self, agent: int, hold: bool) -> None:
-        dirty = self._dirty
         for node in self._touched.pop((agent, hold), ()):
             for x in self._reach[node]:
                 self._ranges[x] = [e for e in self._ranges[x] if e[2] != agent or e[3] != hold]
                 self._cache[x] = None
-                if dirty is not None:
-                    dirty.add(x)
 
     def hold(self, agent: int, node: int, last: int) -> None:
         """Keep ``node`` (and the nodes near it) for ``agent`` during ``0 .. last`` until
@@ -118,8 +110,6 @@ class IntervalTable(NodeRanges[List[Tuple[int, int]]]):
         self._starts: List[Optional[List[int]]] = [None] * n
         #: unit time: reserved moves ``(u, v, t)`` (leaving ``u`` at ``t``), for swap checks
         self.moves: Set[Tuple[int, int, int]] = set()
-        #: the safe intervals as arrays, for the compiled search (made on first use, see :meth:`arrays`)
-        self._arrays: Optional[_SearchArrays] = None
 
     def holders(self, node: int) -> Set[int]:
         """The agents not planned yet whose held start blocks ``node``."""
@@ -159,27 +149,124 @@ class IntervalTable(NodeRanges[List[Tuple[int, int]]]):
             self._starts[node] = [a for a, _ in s]
         return s
 
+
+class ArrayIntervalTable:
+    """:class:`IntervalTable` with its ranges and safe intervals in arrays, kept by compiled loops
+    (:mod:`~agents.search.mapf.compiled`): what the array form of :func:`sipp` reads, with no
+    Python work per blocked node. Durative time only; the same interface and the same safe
+    intervals as :class:`IntervalTable` (make either with :func:`interval_table`).
+
+    Each blocked range is an entry ``(first, last, agent, is_hold)`` in a linked list per node
+    (recorded at the node and at the nodes near it); a change flags the nodes it touched, and
+    :meth:`arrays` recomputes their safe intervals.
+
+    Args:
+        inst: the instance (graph, durative time model, proximity).
+        capacity: room for this many entries at first (the arrays grow as needed).
+        intervals: room for this many safe intervals per node at first (likewise).
+    """
+
+    def __init__(self, inst: MapfInstance, capacity: int = 1024, intervals: int = 4) -> None:
+        if inst.unit:
+            raise ValueError("ArrayIntervalTable keeps durative time only; use IntervalTable")
+        self.inst = inst
+        self.unit = False
+        n = inst.n_nodes
+        self.reach_ptr, self.reach_idx = _reach_csr(inst)
+        self.head = np.full(n, -1, dtype=np.int64)
+        self.top = 0
+        self.e_first = np.zeros(0, dtype=np.int64)
+        self.e_last = np.zeros(0, dtype=np.int64)
+        self.e_agent = np.zeros(0, dtype=np.int64)
+        self.e_hold = np.zeros(0, dtype=np.uint8)
+        self.e_next = np.zeros(0, dtype=np.int64)
+        self._grow_entries(capacity)
+        self.dirty = np.ones(n, dtype=np.uint8)  # every node's intervals still to compute
+        self.dirty_list = np.arange(n, dtype=np.int64)
+        self.n_dirty = n
+        self.search = _SearchArrays(n, intervals)
+        #: per agent, the nodes it holds
+        self._held: Dict[int, Set[int]] = {}
+        self._max_reach = int(np.diff(self.reach_ptr).max()) if n else 0
+
+    def _grow_entries(self, need: int) -> None:
+        cap = max(need, 2 * len(self.e_next))
+        for name in ("e_first", "e_last", "e_agent", "e_hold", "e_next"):
+            old = getattr(self, name)
+            new = np.zeros(cap, dtype=old.dtype)
+            new[:self.top] = old[:self.top]
+            setattr(self, name, new)
+
+    def _block(self, events: np.ndarray, agent: int, hold: bool) -> None:
+        need = self.top + 2 * len(events) * self._max_reach
+        if need > len(self.e_next):
+            self._grow_entries(need)
+        self.top, self.n_dirty = compiled.block_ranges(
+            events, FOREVER, agent, int(hold), self.reach_ptr, self.reach_idx, self.head, self.e_first, self.e_last,
+            self.e_agent, self.e_hold, self.e_next, self.top, self.dirty, self.dirty_list, self.n_dirty)
+
+    def hold(self, agent: int, node: int, last: int) -> None:
+        """As :meth:`IntervalTable.hold`."""
+        self._held.setdefault(agent, set()).add(node)
+        self._block(np.array([[node, last]], dtype=np.int64), agent, True)
+
+    def release(self, agent: int) -> None:
+        """As :meth:`IntervalTable.release`."""
+        for node in self._held.pop(agent, ()):
+            self.n_dirty = compiled.drop_holds(node, agent, self.reach_ptr, self.reach_idx, self.head, self.e_agent,
+                                               self.e_hold, self.e_next, self.dirty, self.dirty_list, self.n_dirty)
+
+    def reserve(self, agent: int, events: Sequence[Tuple[int, int]]) -> None:
+        """As :meth:`IntervalTable.reserve`."""
+        self._block(np.asarray(events, dtype=np.int64).reshape(-1, 2), agent, False)
+
+    def holders(self, node: int) -> Set[int]:
+        """As :meth:`IntervalTable.holders`."""
+        out = set()
+        e = int(self.head[node])
+        while e >= 0:
+            if self.e_hold[e]:
+                out.add(int(self.e_agent[e]))
+            e = int(self.e_next[e])
+        return out
+
+    def safe(self, node: int) -> List[Tuple[int, int]]:
+        """As :meth:`IntervalTable.safe`."""
+        arr = self.arrays()
+        return [(int(arr.lo[node, j]), int(arr.hi[node, j])) for j in range(int(arr.n[node]))]
+
     def arrays(self) -> "_SearchArrays":
         """The safe intervals of every node as arrays (brought up to date), with the compiled
         search's scratch space."""
-        arr = self._arrays
-        if arr is None:
-            arr = self._arrays = _SearchArrays(self.inst.n_nodes)
-            self._dirty = set(range(self.inst.n_nodes))
-        dirty = self._dirty
-        assert dirty is not None
-        if dirty:
-            safe = self.safe
-            for x in dirty:
-                s = safe(x)
-                m = len(s)
-                if m > arr.cap:
-                    arr.grow(m)
-                arr.lo[x, :m] = [a for a, _ in s]
-                arr.hi[x, :m] = [b for _, b in s]
-                arr.n[x] = m
-            dirty.clear()
+        arr = self.search
+        done = 0
+        while done < self.n_dirty:
+            done, need = compiled.refresh_intervals(self.dirty_list, done, self.n_dirty, self.dirty, self.head,
+                                                    self.e_first, self.e_last, self.e_next, arr.lo, arr.hi, arr.n,
+                                                    FOREVER)
+            if need:
+                arr.grow(need)
+        self.n_dirty = 0
         return arr
+
+
+def _reach_csr(inst: MapfInstance) -> Tuple[np.ndarray, np.ndarray]:
+    """Per node, itself and the nodes near it, as CSR arrays ``(indptr, nodes)``."""
+    n = inst.n_nodes
+    if inst.near_mat is None or inst.near is None:
+        return np.arange(n + 1, dtype=np.int64), np.arange(n, dtype=np.int64)
+    near = inst.near_mat.copy()
+    np.fill_diagonal(near, True)
+    rows, cols = np.nonzero(near)
+    return np.searchsorted(rows, np.arange(n + 1)).astype(np.int64), cols.astype(np.int64)
+
+
+def interval_table(inst: MapfInstance) -> Union[IntervalTable, ArrayIntervalTable]:
+    """The table :func:`sipp` searches fastest against on ``inst``: :class:`ArrayIntervalTable`
+    under durative time where the compiled loops are active, :class:`IntervalTable` otherwise."""
+    if not inst.unit and compiled.active():
+        return ArrayIntervalTable(inst)
+    return IntervalTable(inst)
 
 
 class _SearchArrays:
@@ -210,11 +297,14 @@ class _SearchArrays:
         self.touched = np.zeros(size, dtype=np.int64)
 
 
-def _sipp_compiled(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int],
+def _sipp_compiled(inst: MapfInstance, agent: int, table: ArrayIntervalTable, budget: Optional[int],
                    count: List[int], explored: Optional[Set[int]]) -> Optional[Events]:
-    """:func:`sipp` under the durative time model by the compiled loop (the same path, the same
-    expansions)."""
+    """:func:`sipp` against an :class:`ArrayIntervalTable` by the compiled loop (the same path, the
+    same expansions)."""
     arr = table.arrays()
+    s = inst.starts[agent]
+    if arr.n[s] == 0 or arr.lo[s, 0] != 0:
+        return None  # the start is blocked at time 0
     indptr, targets, durs = inst.moves_csr
     h = inst.h_array[agent]
     arr.expl.fill(0)
@@ -251,7 +341,7 @@ class BudgetExceeded(Exception):
     """Raised by :func:`sipp` when its expansion budget runs out."""
 
 
-def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[int] = None,
+def sipp(inst: MapfInstance, agent: int, table: Union[IntervalTable, ArrayIntervalTable], budget: Optional[int] = None,
          counter: Optional[List[int]] = None, explored: Optional[Set[int]] = None) -> Optional[Events]:
     """The earliest timed path of ``agent`` to its goal that avoids ``table`` (``None``: none).
 
@@ -261,14 +351,17 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     collects the nodes the search expanded (where a search that fails was confined). The path is optimal: it
     arrives at the goal no later than any other path that avoids the table and parks there.
 
-    Under the durative time model, where numba is installed, the search runs as a compiled loop
-    (:mod:`~agents.search.mapf.compiled`) over the table's intervals as arrays: the same states in
-    the same order, so the same path and the same expansions.
+    Against an :class:`ArrayIntervalTable` (durative time, see :func:`interval_table`) the search
+    runs as a compiled loop (:mod:`~agents.search.mapf.compiled`) over the table's intervals as
+    arrays: the same states in the same order, so the same path and the same expansions.
     """
     s, g = inst.starts[agent], inst.goals[agent]
-    h = inst.h[agent]
-    if h[s] >= UNREACHABLE:
+    if inst.h_array[agent, s] >= UNREACHABLE:
         return None
+    count = counter if counter is not None else [0]
+    if isinstance(table, ArrayIntervalTable):
+        return _sipp_compiled(inst, agent, table, budget, count, explored)
+    h = inst.h[agent]
     safe = table.safe
     cache = table._cache
     starts_cache = table._starts  # set together with ``cache`` by ``safe``
@@ -279,9 +372,6 @@ def sipp(inst: MapfInstance, agent: int, table: IntervalTable, budget: Optional[
     s_int = safe(s)
     if not s_int or s_int[0][0] != 0:
         return None  # the start is blocked at time 0
-    count = counter if counter is not None else [0]
-    if not unit and compiled.active():
-        return _sipp_compiled(inst, agent, table, budget, count, explored)
     push, pop = heapq.heappush, heapq.heappop
     # a state (node v, its j-th safe interval) is coded j * N + v; best arrival and parent per code
     best: Dict[int, int] = {s: 0}

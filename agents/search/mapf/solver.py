@@ -4,7 +4,8 @@ The solver checks the instance without searching where it can (unreachable goals
 goals within the proximity radius, an exact two-agent feasibility check of every pair on small
 instances), then runs optimal CBS (:mod:`agents.search.mapf.cbs`) or, with
 ``suboptimality > 1``, ECBS (:mod:`agents.search.mapf.ecbs`) under the time, memory and node
-limits, and returns a :class:`~agents.search.mapf.result.CBSResult`. See :mod:`agents.search.mapf`
+limits, and returns a :class:`~agents.search.mapf.result.MapfResult` (``solver`` ``"cbs"``, the
+search's statistics a :class:`~agents.search.mapf.result.CBSStats`). See :mod:`agents.search.mapf`
 for the problem and the algorithm.
 """
 from __future__ import annotations
@@ -24,7 +25,7 @@ from .feasibility import infeasible_component
 from .instance import GraphLike, MapfInstance, ProximityLike
 from .lowlevel import SearchTimeout
 from .paths import spread_mode
-from .result import CBSResult
+from .result import MapfResult
 from .symmetry import GridGeometry
 
 #: The high-level heuristics of optimal CBS.
@@ -337,8 +338,9 @@ class CBSSolver:
         return None
 
     # -------------------------------------------------------------- solve
-    def solve(self) -> CBSResult:
-        """Run the search and return a :class:`CBSResult` (never raises on a hard instance)."""
+    def solve(self) -> MapfResult:
+        """Run the search and return a :class:`~agents.search.mapf.result.MapfResult` (never raises on a
+        hard instance); ``work`` counts the low-level expansions."""
         # the search allocates many small long-lived objects; with the default thresholds the
         # cyclic garbage collector keeps rescanning them (about a fifth of the run time), so it
         # runs less often during the search (the thresholds are restored afterwards)
@@ -349,25 +351,26 @@ class CBSSolver:
         finally:
             gc.set_threshold(*old)
 
-    def _solve(self) -> CBSResult:
+    def _solve(self) -> MapfResult:
         t0 = _time.perf_counter()
         inst = self.instance
         ctx = SearchContext(inst, math.inf if self.time_limit is None else t0 + self.time_limit, self)
         stats = ctx.stats
 
-        def finish(res: CBSResult) -> CBSResult:
-            stats.ll_expanded = ctx.counter.expanded
+        def finish(res: MapfResult) -> MapfResult:
             stats.ll_calls = ctx.counter.calls
-            stats.runtime_s = _time.perf_counter() - t0
             res.stats = stats
+            res.work = ctx.counter.expanded
+            res.runtime_s = _time.perf_counter() - t0
+            res.solver = "cbs"
             res.time_model = inst.time_model
             return res
 
         if inst.n_agents == 0:
-            return finish(CBSResult("optimal", [], 0, 0, 0, message="no agents"))
+            return finish(MapfResult("optimal", [], 0, 0, 0, message="no agents"))
         reason = self._precheck()
         if reason is not None:
-            return finish(CBSResult("infeasible", message=reason))
+            return finish(MapfResult("infeasible", message=reason))
         w = self.suboptimality
         search: CBSSearch
         if w > 1.0:
@@ -396,13 +399,13 @@ class CBSSolver:
                        f"{self.memory_limit_mb:g} MiB (memory_limit_mb)")
             else:
                 msg = f"time limit of {self.time_limit} s reached"
-            return finish(CBSResult("timeout", lower_bound=lb, message=msg))
+            return finish(MapfResult("timeout", lower_bound=lb, message=msg))
         if status == "infeasible":
             msg = ctx.infeasible_reason or "the constraint tree was exhausted: no solution exists"
-            return finish(CBSResult("infeasible", message=msg))
+            return finish(MapfResult("infeasible", message=msg))
         if status == "limit":
-            return finish(CBSResult("timeout", lower_bound=search.lower_bound or None,
-                                    message=f"node limit of {self.node_limit} expansions reached"))
+            return finish(MapfResult("timeout", lower_bound=search.lower_bound or None,
+                                     message=f"node limit of {self.node_limit} expansions reached"))
         assert node is not None  # "solved" comes with its node
         paths = [list(p.events) for p in node.paths]
         soc = sum(p.cost for p in node.paths)
@@ -413,7 +416,7 @@ class CBSSolver:
             msg = f"cost within {w:g} x optimal" if st == "suboptimal" else "cost equals the proven lower bound"
         else:
             lb, st, msg = soc, "optimal", "optimal sum of costs"
-        return finish(CBSResult(st, paths, soc, makespan, lb, message=msg))
+        return finish(MapfResult(st, paths, soc, makespan, lb, message=msg))
 
 
 def solve_cbs(
@@ -428,12 +431,12 @@ def solve_cbs(
     node_limit: Optional[int] = None,
     vanilla: bool = False,
     **options: Any,
-) -> CBSResult:
+) -> MapfResult:
     """Solve a multi-agent path finding instance with CBS (or ECBS if ``suboptimality > 1``).
 
     ``graph`` holds edge durations (scipy sparse / dense matrix or adjacency list); see
-    :class:`CBSSolver` for the options. Returns a :class:`CBSResult`; raises ``ValueError``
-    only for malformed input (bad node ids, duplicate starts or goals, bad durations).
+    :class:`CBSSolver` for the options. Returns a :class:`~agents.search.mapf.result.MapfResult`; raises
+    ``ValueError`` only for malformed input (bad node ids, duplicate starts or goals, bad durations).
     """
     return CBSSolver(graph, starts, goals, time_model=time_model, proximity=proximity,
                      suboptimality=suboptimality, time_limit=time_limit, node_limit=node_limit,
