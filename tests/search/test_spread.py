@@ -4,7 +4,7 @@ import pytest
 
 from agents.search.mapf import EMPTY, CBSSolver, MapfInstance, Proximity, compile_constraints, solve_cbs, validate
 from agents.search.mapf.paths import AgentPath, Reservation
-from agents.search.mapf.successors import SPREAD_SHIFT, make_expander
+from agents.search.mapf.successors import SPREAD_SHIFT, make_successors
 
 
 def adjacency(n, edges):
@@ -87,13 +87,21 @@ def test_places_hold_the_other_routes_and_their_neighbours():
     assert CBSSolver(inst, spread="routes").spread == "routes" and CBSSolver(inst).spread == "off"
 
 
+def moves(inst, cc, res):
+    """``(v, t) -> [(w, arrival, conflicts), ...]``: the successors of a search with no state
+    closed and no heuristic."""
+    N = inst.n_nodes
+    successors = make_successors(inst, cc, res, [0] * N, set(), 1 << 20)
+    return lambda v, t: [(code % N, f, conflicts) for code, f, conflicts, _ in successors(t * N + v, v, t, 0)]
+
+
 def test_a_successor_counts_conflicts_first_and_places_second():
     adj = two_routes(1, 6, detour=0)
     inst = MapfInstance(adj, [1, 3], [2, 4], time_model="durative")
     other = AgentPath([(1, 0), (2, 1)], inst)  # at 1 during step 0, parked at 2 from time 1
     cc = compile_constraints(EMPTY, inst.n_nodes, 4)
-    spread = make_expander(inst, cc, Reservation([other, None], 1, inst, spread="routes"))
-    plain = make_expander(inst, cc, Reservation([other, None], 1, inst))
+    spread = moves(inst, cc, Reservation([other, None], 1, inst, spread="routes"))
+    plain = moves(inst, cc, Reservation([other, None], 1, inst))
     # 0 -> 1 during step 0 meets agent 0 at node 1 and enters one of its places
     assert (1, 1, (1 << SPREAD_SHIFT) + 1) in spread(0, 0) and (1, 1, 1) in plain(0, 0)
     # later node 1 is free: a place, no conflict

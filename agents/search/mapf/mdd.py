@@ -13,7 +13,7 @@ import numpy as np
 
 from .constraints import CompiledConstraints
 from .instance import MapfInstance
-from .successors import make_expander
+from .successors import goal_successors, make_successors
 
 #: The ``end`` of :meth:`MDD.avoidable` when none is given: past every time of a plan.
 _NO_END = 1 << 60
@@ -144,50 +144,33 @@ class MDD:
 
 
 def build_mdd(inst: MapfInstance, agent: int, cc: CompiledConstraints, cost: int) -> MDD:
-    """The MDD of ``agent`` under ``cc`` for its optimal cost ``cost``."""
+    """The MDD of ``agent`` under ``cc`` for its optimal cost ``cost``.
+
+    A forward pass, time by time, keeps the moves from the states reached so far that can still
+    arrive at the goal by ``cost`` (and at ``cost`` only at the goal); a backward pass keeps those
+    of them that lead to the goal at ``cost``.
+    """
     N = inst.n_nodes
-    h = inst.h[agent]
     s, g = inst.starts[agent], inst.goals[agent]
+    successors = make_successors(inst, cc, None, inst.h[agent], frozenset(), cost + 1, f_limit=cost,
+                                 successors_h=goal_successors(inst, agent))
     fwd: List[Tuple[int, int, int, int]] = []
-    if inst.unit:
-        vset, eset, forever = cc.vset, cc.eset, cc.forever
-        succ = inst.succ
-        layer: Set[int] = {s}
-        for t in range(cost):
-            nt = t + 1
-            vb = nt * N
-            rem = cost - nt
-            nxt: Set[int] = set()
-            last = nt == cost
-            for v in sorted(layer):
-                src = (t * N + v) * N
-                for w in succ[v]:
-                    if h[w] > rem or (last and w != g) or (vb + w) in vset:
-                        continue
-                    if w != v and (src + w) in eset:
-                        continue
-                    if forever:
-                        fw = forever.get(w)
-                        if fw is not None and nt >= fw:
-                            continue
-                    nxt.add(w)
-                    fwd.append((v, t, w, nt))
-            layer = nxt
-    else:
-        expand = make_expander(inst, cc, None)
-        layers: Dict[int, Set[int]] = {0: {s}}
-        for t in range(cost):
-            nodes = layers.get(t)
-            if not nodes:
-                continue
-            for v in sorted(nodes):
-                for w, nt, _ in expand(v, t):
-                    if nt > cost or nt + h[w] > cost:
-                        continue
-                    if nt == cost and w != g:
-                        continue
-                    layers.setdefault(nt, set()).add(w)
-                    fwd.append((v, t, w, nt))
+    layers: Dict[int, Set[int]] = {0: {s}}
+    for t in range(cost):
+        nodes = layers.get(t)
+        if not nodes:
+            continue
+        for v in sorted(nodes):
+            for code, f, _, hw in successors(t * N + v, v, t, 0):
+                nt, w = f - hw, code % N
+                if nt == cost and w != g:
+                    continue
+                layer = layers.get(nt)
+                if layer is None:
+                    layers[nt] = {w}
+                else:
+                    layer.add(w)
+                fwd.append((v, t, w, nt))
     alive = {cost * N + g}
     kept = []
     for v, t, w, nt in reversed(fwd):

@@ -140,7 +140,7 @@ class Reservation:
     ``spread`` (durative model only) fills :attr:`places`: ``"routes"`` with every node the other
     paths visit, at any time, ``"near"`` with those and the nodes near them (``"off"``: empty).
     The low-level searches then prefer, of paths equal in cost and conflicts, those that enter
-    fewer of those places (see :func:`~agents.search.mapf.successors.make_expander`).
+    fewer of those places (see :func:`~agents.search.mapf.successors.make_successors`).
     """
 
     __slots__ = ("occ", "moves", "parked", "horizon", "places")
