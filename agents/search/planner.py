@@ -79,9 +79,7 @@ SOLVERS = tuple(REGISTERED_SOLVERS)
 #: the apartments up to about 480, CenterDot's small room about 2,200)
 REFERENCE_EDGE_STEPS = 600
 #: buffer nodes up to which ``prioritized_expansions_per_agent`` holds as given; on a graph of more
-#: nodes, where one agent's safe-interval search explores more of them, it grows in proportion (1000
-#: agents on hard problems of the 4000-node scatter-64-64 graph take 1,650 to 2,000 expansions per
-#: agent where the first order succeeds, 3,400 with one restart, 9,500 with four)
+#: nodes, where one agent's safe-interval search explores more of them, it grows in proportion
 REFERENCE_BUFFER_NODES = 1000
 #: default ``d_max`` (predicted steps): edges of the graph are shorter
 DEFAULT_D_MAX = 7.0
