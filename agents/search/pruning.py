@@ -198,13 +198,19 @@ def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer:
     s_ids = np.arange(n, n + k)
     g_ids = np.arange(n + k, n + 2 * k)
     c = float(c_max)
-    short = admissible(D, n_buffer, d_max, exclude, exclude_edges) if allowed is None else allowed
-    c_top = float(C[short].max()) if short.any() else 0.0
+    short: Optional[np.ndarray] = allowed
+    c_top: Optional[float] = None  # the costliest admissible edge: no relaxation goes beyond it
     while True:
         g = sparse.csr_matrix(keep)
         fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
         ok = fwd[np.arange(k), g_ids]
-        if ok.all() or not relax or not math.isfinite(c) or c > c_top:
+        if ok.all() or not relax or not math.isfinite(c):
+            return ok, c
+        if short is None:
+            short = admissible(D, n_buffer, d_max, exclude, exclude_edges)
+        if c_top is None:
+            c_top = float(C[short].max()) if short.any() else 0.0
+        if c > c_top:
             return ok, c
         c *= 2.0
         bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
