@@ -252,13 +252,13 @@ class ArrayIntervalTable:
 
 def _reach_csr(inst: MapfInstance) -> Tuple[np.ndarray, np.ndarray]:
     """Per node, itself and the nodes near it, as CSR arrays ``(indptr, nodes)``."""
-    n = inst.n_nodes
-    if inst.near_mat is None or inst.near is None:
+    n, near = inst.n_nodes, inst.near
+    if near is None:
         return np.arange(n + 1, dtype=np.int64), np.arange(n, dtype=np.int64)
-    near = inst.near_mat.copy()
-    np.fill_diagonal(near, True)
-    rows, cols = np.nonzero(near)
-    return np.searchsorted(rows, np.arange(n + 1)).astype(np.int64), cols.astype(np.int64)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum([1 + len(x) for x in near], out=indptr[1:])
+    nodes = np.fromiter((v for u in range(n) for v in (u, *near[u])), dtype=np.int64, count=int(indptr[-1]))
+    return indptr, nodes
 
 
 def interval_table(inst: MapfInstance) -> Union[IntervalTable, ArrayIntervalTable]:
