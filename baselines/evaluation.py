@@ -27,8 +27,9 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
+from agents.search.config import GraphConfig, SolverConfig, preset_for
 from agents.search.graph import NodePairwise
-from agents.search.models import default_detour, default_second_opinion
+from agents.search.models import default_second_opinion
 from agents.search.planner import BufferPlanner
 from agents.search.repair import EdgeMemory
 from agents.search.sparsify import two_way_consistent
@@ -64,7 +65,10 @@ class EvaluationSetup:
     """Everything the methods share: the env id, both agents, the graph nodes and their matrices.
 
     Build it with :meth:`build`; ``models`` maps ``"unconstrained"``/``"constrained"`` to a
-    :class:`~agents.algorithm.SafeGoalTD3`.
+    :class:`~agents.algorithm.SafeGoalTD3`. ``graph`` and ``solver`` configure the planner every
+    search method starts from (default: the graph of
+    :func:`~agents.search.config.preset_for` the unconstrained agent, the default solver); a
+    method changes them with its options.
     """
 
     env_id: str
@@ -73,11 +77,9 @@ class EvaluationSetup:
     observations: np.ndarray
     D: np.ndarray
     C: np.ndarray
-    d_max: float = 7.0
-    proximity_radius: float = 1.5
-    suboptimality: float = 1.1
     min_separation: float = 2.5
-    max_edges: Optional[int] = None
+    graph: Optional[GraphConfig] = None
+    solver: Optional[SolverConfig] = None
     shortest: np.ndarray = field(init=False, repr=False)
     planner: BufferPlanner = field(init=False, repr=False)
 
@@ -85,8 +87,7 @@ class EvaluationSetup:
         unc = self.models["unconstrained"]
         self.planner = BufferPlanner(
             self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
-            d_max=self.d_max, proximity_radius=self.proximity_radius, suboptimality=self.suboptimality,
-            max_edges=self.max_edges, detour=default_detour(unc),
+            self.graph if self.graph is not None else preset_for(unc).graph, self.solver,
             second_opinion=default_second_opinion(unc, self.models.get("constrained")))
         # problem difficulty: shortest predicted distances on the planner's own buffer graph
         self.shortest = dijkstra(self.planner.buffer_graph.distance, directed=True)
@@ -148,7 +149,8 @@ def make_problems(setup: EvaluationSetup, difficulty: str, n_agents: int, n_prob
     sp = setup.shortest
     ok_pair = (sp >= lo) & (sp <= hi)
     pos = setup.states
-    near = (setup.D < setup.proximity_radius) | (setup.D.T < setup.proximity_radius)
+    radius = setup.planner.graph.proximity_radius or 0.0
+    near = (setup.D < radius) | (setup.D.T < radius)
     far = (np.linalg.norm(pos[:, None] - pos[None], axis=-1) >= min_separation) & ~near
     n = len(pos)
     rng = np.random.default_rng([seed, n_agents, list(DIFFICULTIES).index(difficulty)])
@@ -455,7 +457,7 @@ def c_max_grid(setup: EvaluationSetup, quantiles: Sequence[float] = C_MAX_QUANTI
     costs = setup.C[src, dst]
     costs = costs[costs > 0]
     if not len(costs):
-        raise ValueError(f"the graph has no edge shorter than d_max={setup.d_max:g} with a positive cost")
+        raise ValueError(f"the graph has no edge shorter than d_max={setup.planner.graph.d_max:g} with a positive cost")
     return sorted({float(f"{np.quantile(costs, q):.3g}") for q in quantiles})
 
 

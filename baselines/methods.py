@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from agents.search.config import SearchConfig, preset_for
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
 from agents.search.repair import EdgeMemory
@@ -39,28 +40,20 @@ from .execution import Contacts, Execution, geodesic_of, tally_step
 
 @dataclass(frozen=True)
 class Method:
-    """A named, configurable method.
+    """A named method: which checkpoint drives, whether it plans, and its change to the search config.
 
     Attributes:
         name: short key (CLI ``--methods``).
         label: column title in the table.
         policy: which checkpoint drives the agents: ``"unconstrained"`` or ``"constrained"``.
-        search: plan waypoints with CBS on the buffer graph (``False``: straight to the goal).
-        c_max: cost cut-off of the graph's edges (``inf``: distance pruning only).
-        budget: optional per-agent bound on the total predicted cost of a route.
-        hold: how the agents keep to the plan: in its ``"order"`` at shared places, or on its
-            clock (an early agent waits for its planned departure time at ``"all"`` waypoints or
-            only where the plan ``"waits"``); ``None``: the policy's default
-            (:func:`~agents.search.policy.default_hold`).
+        search: plan waypoints on the buffer graph (``False``: straight to the goal).
+        options: the method's change to the search config, as ``(option, value)`` pairs by the
+            names of :data:`~agents.search.config.OPTIONS` (e.g. ``(("c_max", 0.25),)``); applied to
+            the evaluation's config (the planner's graph and solver, the driver's preset for the
+            rest) when the method runs.
         fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
             leg once its own policy is stuck there (see
             :class:`~agents.search.controller.WaypointController`).
-        repair_routes: an agent about to set off along an edge another agent failed on in the run
-            plans around it first (:class:`~agents.search.policy.SearchPolicy`'s ``repair_routes``).
-        spread_routes: the planner's ``spread_routes`` (``"off"``, ``"routes"`` or ``"near"``; see
-            :class:`~agents.search.planner.BufferPlanner`); ``None``: the planner's own.
-        max_leg: the planner's ``max_leg`` (no leg its second critic reads beyond this many steps);
-            ``None``: the planner's own.
         safety: run with the :class:`~agents.search.safety.SafetyLayer` of the env between the
             controller and the env (the agents share their positions within the team).
     """
@@ -69,17 +62,35 @@ class Method:
     label: str
     policy: str
     search: bool
-    c_max: float = math.inf
-    budget: Optional[float] = None
-    hold: Optional[str] = None
+    options: Tuple[Tuple[str, Any], ...] = ()
     fallback: Optional[str] = None
-    repair_routes: bool = False
-    spread_routes: Optional[str] = None
-    max_leg: Optional[float] = None
     safety: bool = True
 
-    def with_options(self, **kwargs) -> "Method":
-        return replace(self, **kwargs)
+    def __post_init__(self) -> None:
+        SearchConfig().updated(**dict(self.options))  # unknown names and bad values fail here
+
+    def with_options(self, **kwargs: Any) -> "Method":
+        """The method with config options (by name) or its ``fallback`` / ``safety`` changed."""
+        own = {k: kwargs.pop(k) for k in ("fallback", "safety") if k in kwargs}
+        return replace(self, options=tuple({**dict(self.options), **kwargs}.items()), **own)
+
+    def option(self, name: str, default: Any = None) -> Any:
+        """The value the method gives the config option ``name`` (``default`` where it gives none)."""
+        return dict(self.options).get(name, default)
+
+    @property
+    def c_max(self) -> float:
+        """The method's edge cost cut-off (``inf``: distance pruning only)."""
+        return float(self.option("c_max", math.inf))
+
+    @property
+    def budget(self) -> Optional[float]:
+        """The method's risk budget (``None``: none)."""
+        return self.option("budget")
+
+    def config(self, base: SearchConfig) -> SearchConfig:
+        """``base`` with the method's options applied."""
+        return base.updated(**dict(self.options)) if self.options else base
 
 
 #: edge cost cut-off of the constrained search (predicted cumulative cost of one edge)
@@ -93,9 +104,9 @@ METHODS: Dict[str, Method] = {
         Method("unconstrained_policy", "Unconstrained Policy", "unconstrained", False),
         Method("sorb", "Unconstrained Search (SoRB+CBS)", "unconstrained", True),
         Method("constrained_policy", "Constrained Policy", "constrained", False),
-        Method("ours", "Constrained Search (Ours, CBS)", "constrained", True, c_max=DEFAULT_C_MAX),
-        Method("ours_budget", "Constrained Search + Risk Budget", "constrained", True, c_max=DEFAULT_C_MAX,
-               budget=DEFAULT_BUDGET),
+        Method("ours", "Constrained Search (Ours, CBS)", "constrained", True, (("c_max", DEFAULT_C_MAX),)),
+        Method("ours_budget", "Constrained Search + Risk Budget", "constrained", True,
+               (("c_max", DEFAULT_C_MAX), ("budget", DEFAULT_BUDGET))),
         # the multi-agent RL baselines (baselines.marl_rows): their policy is the model of the same name
         Method("ippo", "IPPO (MARL)", "ippo", False),
         Method("mappo_lag", "MAPPO-Lagrangian (MARL)", "mappo_lag", False),
@@ -129,10 +140,6 @@ def execute(
     starts: np.ndarray,
     goals: np.ndarray,
     seed: int = 0,
-    reach_threshold: Optional[float] = None,
-    safety_radius: float = 2.0,
-    hold: Optional[str] = None,
-    ban_radius: float = 3.0,
     node_positions: Optional[np.ndarray] = None,
     memory: Optional[EdgeMemory] = None,
 ) -> Execution:
@@ -141,10 +148,9 @@ def execute(
     Positions only place the agents (the environment's reset); the planner and the agents
     see observations. The run ends when every agent is at its goal or at ``env.max_cycles``.
     Every method runs as a :class:`~agents.search.policy.SearchPolicy` (without a planner for
-    the methods without search): ``hold`` overrides the method's (see
-    :meth:`~agents.search.planner.MultiAgentPlan.agent_plans`); a search method's stuck agent
-    replans on the same graph without the nodes within ``ban_radius`` of the waypoint it
-    failed to reach.
+    the methods without search) whose config is the planner's graph and solver with the
+    driver's preset (:func:`~agents.search.config.preset_for`) for the rest, changed by the
+    method's options (:meth:`Method.config`).
 
     Every agent that does not arrive gets a reason (:attr:`Execution.failures`, see
     :mod:`baselines.anatomy`), read from ground truth after the run; ``node_positions`` (the
@@ -159,22 +165,21 @@ def execute(
         return execute_marl(env, models[method.policy], starts, goals, seed=seed)
     obs, infos = env.reset(seed=seed, options={"starts": starts, "goals": goals})
     names = list(env.agents)
-    planner_m = None
+    driver = models[method.policy]
+    base = preset_for(driver)
     if method.search:
         if planner is None:
             raise ValueError(f"method {method.name!r} needs a planner")
-        changes: Dict[str, Any] = {"c_max": method.c_max} if planner.c_max != method.c_max else {}
-        if method.spread_routes not in (None, planner.spread_routes):
-            changes["spread_routes"] = method.spread_routes
-        if method.max_leg not in (None, planner.max_leg):
-            changes["max_leg"] = method.max_leg
-        planner_m = planner.with_options(**changes) if changes else planner
+        base = replace(base, graph=planner.graph, solver=planner.solver_config)
     safety = SafetyLayer.for_env(env) if method.safety and getattr(env, "agent_collisions", True) else None
-    policy = SearchPolicy(planner_m, models[method.policy], budget=method.budget, hold=hold or method.hold,
-                          reach_threshold=reach_threshold, safety_radius=safety_radius, ban_radius=ban_radius,
-                          seed=seed, fallback_model=models[method.fallback] if method.fallback else None,
-                          memory=memory if method.search else None, repair_routes=method.repair_routes,
-                          safety=safety)
+    config = method.config(base)
+    if method.search:
+        assert planner is not None
+        planner = planner.with_configs(config.graph, config.solver)
+    policy = SearchPolicy(planner if method.search else None, driver, controller=config.controller,
+                          replanning=config.replanning, budget=config.budget, seed=seed,
+                          fallback_model=models[method.fallback] if method.fallback else None,
+                          memory=memory if method.search else None, safety=safety)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)

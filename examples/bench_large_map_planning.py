@@ -164,7 +164,7 @@ def main() -> None:
     min_sep = default_min_separation(env_id)
     for k in args.agents:
         problems = draw_problems(states, planner.D, shortest, k, args.repeats, args.seed, min_sep,
-                                 planner.proximity_radius or 0.0)
+                                 planner.graph.proximity_radius or 0.0)
         for name in args.solvers:
             pl = planner.with_options(solver=name, time_limit=args.time_limit)
             times, cpu, solver_times, socs, spans, valid = [], [], [], [], [], 0

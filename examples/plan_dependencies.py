@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,7 @@ def main(argv=None) -> int:
     import torch
 
     import safe_mapf_envs
+    from agents.search.config import preset_for
     from agents.search.policy import SearchPolicy
     from baselines.evaluation import EvaluationSetup, make_problems
     from baselines.methods import get_methods
@@ -67,14 +69,16 @@ def main(argv=None) -> int:
     for m in methods:
         if chosen is not None and math.isfinite(m.c_max):
             m = m.with_options(c_max=float(chosen))
-        planner = setup.planner.with_options(c_max=m.c_max)
         if args.spread is not None:
-            planner = planner.with_options(spread_routes=args.spread)
+            m = m.with_options(spread_routes=args.spread)
+        base = replace(preset_for(setup.models[m.policy]), graph=setup.planner.graph,
+                       solver=setup.planner.solver_config)
         shared, deps, soc = [], [], []
         for prob in problems:
             obs, _ = env.reset(seed=args.seed + prob.index, options={"starts": prob.starts, "goals": prob.goals})
-            policy = SearchPolicy(planner, setup.models[m.policy], budget=m.budget, hold=m.hold,
-                                  seed=args.seed + prob.index)
+            config = m.config(base)
+            policy = SearchPolicy(setup.planner.with_configs(config.graph, config.solver), setup.models[m.policy],
+                                  controller=config.controller, budget=config.budget, seed=args.seed + prob.index)
             policy.predict({a: obs[a] for a in env.agents})
             plan = policy.current_plan
             routes = [set(x) for x in plan.nodes]

@@ -8,6 +8,7 @@ without a critic.
   weighted, risk-bounded);
 - :func:`solve_cbs`, :class:`CBSSolver`, :func:`validate`: CBS / ECBS on any directed graph and
   an independent solution checker;
+- :class:`SearchConfig` and its parts (:mod:`agents.search.config`): every setting, the presets;
 - :class:`BufferPlanner`: CBS waypoints for many agents on the buffer graph, with learned
   proximity and durative edges;
 - :class:`WaypointController`: executes the plans in the PettingZoo environment (closed-loop
@@ -19,6 +20,7 @@ without a critic.
 - :func:`build_problem_graph`: the one pipeline from critic matrices to a problem's pruned graph
   (endpoint attachment, cost cut-off, local relaxation), used by the planner.
 """
+from .config import ControllerConfig, GraphConfig, ReplanConfig, SearchConfig, preset, preset_for
 from .controller import AgentPlan, WaypointController
 from .graph import ProblemGraph, WaypointGraph, build_problem_graph
 from .mapf import (
@@ -40,9 +42,10 @@ from .single import Plan, risk_bounded_path, shortest_path
 from .waypoints import direct_plans
 
 __all__ = [
-    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "MapfInstance", "MapfResult", "MultiAgentPlan", "Plan",
-    "ProblemGraph", "Proximity", "SafetyLayer", "SafetyState", "SearchPolicy", "SolverConfig", "WaypointController",
-    "WaypointGraph",
+    "AgentPlan", "BufferPlanner", "CBSResult", "CBSSolver", "ControllerConfig", "GraphConfig", "MapfInstance",
+    "MapfResult", "MultiAgentPlan", "Plan", "ProblemGraph", "Proximity", "ReplanConfig", "SafetyLayer", "SafetyState",
+    "SearchConfig", "SearchPolicy", "SolverConfig", "WaypointController", "WaypointGraph",
+    "preset", "preset_for",
     "build_problem_graph", "direct_plans", "distance_fn", "integer_durations", "policy_fn", "risk_bounded_path",
     "shortest_path", "solve_cbs", "team_positions", "validate",
 ]

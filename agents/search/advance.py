@@ -33,19 +33,17 @@ three approaches and arrived at step 73; going back, it arrives at step 31).
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Dict, Optional, Tuple
+from typing import Any, Callable, Dict, Tuple
 
 import numpy as np
+
+from .config import ControllerConfig
 
 
 class AdvanceRules:
     """The controller's rules for a reached waypoint (see the module's docstring)."""
 
-    reach_threshold: float
-    self_margin: Optional[float]
-    settle_patience: Optional[int]
-    settle_slack: float
-    advance_slack: Optional[float]
+    config: ControllerConfig
     t: int
     index: Dict[str, int]
     _thresholds: Dict[str, np.ndarray]
@@ -58,7 +56,6 @@ class AdvanceRules:
     _approach: Dict[str, Tuple[int, float, int]]
     #: per agent: the plan the onward distances are of, and per waypoint its predicted distance to the next target
     _onward: Dict[str, Tuple[Any, np.ndarray]]
-    retreat: Optional[str]
     #: per agent going back first: the index of the target whose leg it went back from
     _back: Dict[str, int]
     #: per agent going back: (waypoint index, closest predicted distance, step it came that close)
@@ -69,11 +66,11 @@ class AdvanceRules:
     def _reach_thresholds(self, plan: Any) -> np.ndarray:
         """Per waypoint of ``plan``: the predicted distance below which it counts as reached."""
         k = len(plan.waypoints)
-        thr = np.full(k, self.reach_threshold)
-        if self.self_margin is not None and k:
+        thr = np.full(k, self.config.reach_threshold)
+        if self.config.self_margin is not None and k:
             wps = np.asarray(plan.waypoints)
             own = np.asarray(self.distance(wps, wps), dtype=np.float64).reshape(k)
-            thr = np.maximum(thr, own + self.self_margin)
+            thr = np.maximum(thr, own + self.config.self_margin)
         return thr
 
     def reach_threshold_of(self, agent: str) -> float:
@@ -95,11 +92,11 @@ class AdvanceRules:
         """Track ``agent``'s closest predicted approach to waypoint ``k``; ``True`` once it is within
         ``settle_slack`` of the threshold and has not come closer for ``settle_patience`` steps (an
         agent pressed against a wall with the waypoint behind it reads far, and is not settled)."""
-        if self.settle_patience is None or not math.isfinite(d):
+        if self.config.settle_patience is None or not math.isfinite(d):
             return False
         best = self._closest(self._progress, agent, k, d)
-        near = self._thresholds[agent][k] + self.settle_slack
-        if d < near and best[1] < near and self.t - best[2] >= self.settle_patience:
+        near = self._thresholds[agent][k] + self.config.settle_slack
+        if d < near and best[1] < near and self.t - best[2] >= self.config.settle_patience:
             self.stats.settled += 1
             return True
         return False
@@ -118,14 +115,14 @@ class AdvanceRules:
         """Whether ``agent``, at predicted distance ``d`` (within the reach threshold) from waypoint ``k``,
         is about as near the next target as that waypoint, or comes no closer to the waypoint (always,
         without ``advance_slack``)."""
-        if self.advance_slack is None:
+        if self.config.advance_slack is None:
             return True
         if self.t - self._closest(self._approach, agent, k, d)[2] >= 2:  # no closer for two steps: held no longer
             return True
         plan = self.plans[agent]
         nxt = plan.waypoints[k + 1] if k + 1 < len(plan.waypoints) else plan.goal
         to_next = float(np.asarray(self.distance(observation[None], np.asarray(nxt)[None])).reshape(-1)[0])
-        if to_next <= self._onward_distances(agent)[k] + self.advance_slack:
+        if to_next <= self._onward_distances(agent)[k] + self.config.advance_slack:
             return True
         self.stats.off_course += 1
         return False
@@ -135,7 +132,8 @@ class AdvanceRules:
         on its first leg, nor while it already goes back; with ``"goal"``, only on its leg to the goal)."""
         k = self.index[agent]
         n = len(self.plans[agent].waypoints)
-        if self.retreat is None or agent in self._back or not 1 <= k <= n or self.retreat == "goal" and k < n:
+        retreat = self.config.retreat
+        if retreat is None or agent in self._back or not 1 <= k <= n or retreat == "goal" and k < n:
             return
         self._back[agent] = k
         self._back_best.pop(agent, None)

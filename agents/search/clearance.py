@@ -26,6 +26,8 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 import numpy as np
 
+from .config import ControllerConfig
+
 
 def pair_proximity(distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
                    proximity: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]],
@@ -40,9 +42,7 @@ def pair_proximity(distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
 class GoalClearance:
     """The controller's *clear goal* rules (see :class:`~agents.search.controller.WaypointController`)."""
 
-    goal_clearance: Optional[float]
-    safety_radius: Optional[float]
-    order_patience: int
+    config: ControllerConfig
     t: int
     index: Dict[str, int]
     plans: Dict[str, Any]
@@ -52,7 +52,6 @@ class GoalClearance:
     _clearing: Dict[str, str]
     _clear_since: Dict[Tuple[str, str], int]
     _clear_gave_up: Dict[str, Set[str]]
-    push_margin: Optional[float]
     #: per agent held for another: (that agent, its own target index, its distance to the target then)
     _yielding: Dict[str, Tuple[str, int, float]]
     #: close pairs whose order the push rule decided, and the agent that goes first
@@ -62,8 +61,8 @@ class GoalClearance:
                      to_target: Dict[str, float]) -> None:
         """Hold (``reason`` ``"clear:<agent>"``) the agents near their goal while another live agent
         stands within ``goal_clearance`` of it (see *clear goal* in the module's docstring)."""
-        assert self.goal_clearance is not None  # checked by the caller
-        r = self.goal_clearance
+        assert self.config.goal_clearance is not None  # checked by the caller
+        r = self.config.goal_clearance
         before, self._clearing = self._clearing, {}
         for i, a in enumerate(live):
             if hold[i] or self.index[a] < len(self.plans[a].waypoints) or not to_target.get(a, math.inf) < 2 * r:
@@ -91,7 +90,7 @@ class GoalClearance:
                 if before.get(a) != b and (mine[j] < d[j] or self._touching(obs[i], obs[others[j]])):
                     continue
                 since = self._clear_since.setdefault((a, b), self.t)
-                if self.t - since >= self.order_patience:  # it does not leave: park after all
+                if self.t - since >= self.config.order_patience:  # it does not leave: park after all
                     self._clear_gave_up[a].add(b)
                     continue
                 hold[i] = True
@@ -103,9 +102,10 @@ class GoalClearance:
     def _touching(self, x: np.ndarray, y: np.ndarray) -> bool:
         """Whether two agents' observations are within ``safety_radius`` (under ``proximity``): the
         yield rule settles which of them goes."""
-        if self.safety_radius is None:
+        radius = self.config.safety_radius
+        if radius is None:
             return False
-        return bool(pair_proximity(self.distance, self.proximity, x[None], y[None]).reshape(-1)[0] < self.safety_radius)
+        return bool(pair_proximity(self.distance, self.proximity, x[None], y[None]).reshape(-1)[0] < radius)
 
     def _goal_first(self, live: List[str], obs: np.ndarray, ii: np.ndarray, jj: np.ndarray, close: np.ndarray,
                     i_first: np.ndarray, before: Dict[Tuple[str, str], str]) -> np.ndarray:
@@ -113,7 +113,7 @@ class GoalClearance:
         agents stands within ``goal_clearance`` of the goal the other is on its way to: the one
         standing nearer the other's goal goes first (it has to clear it, or the other parks in front of
         it). ``before``: the pairs so decided on the last step (they keep their order while close)."""
-        assert self.goal_clearance is not None  # checked by the caller
+        assert self.config.goal_clearance is not None  # checked by the caller
         last = np.array([self.index[a] >= len(self.plans[a].waypoints) for a in live])
         sel = np.flatnonzero(close & (last[ii] | last[jj]))
         if len(sel) == 0:
@@ -124,7 +124,7 @@ class GoalClearance:
                                      np.concatenate([goals[jj[sel]], goals[ii[sel]]])), dtype=np.float64).reshape(2 * n)
         by_j = np.where(last[jj[sel]], d[:n], np.inf)  # agent ii stands by jj's goal
         by_i = np.where(last[ii[sel]], d[n:], np.inf)
-        decide = (np.minimum(by_j, by_i) < self.goal_clearance) & (by_j != by_i)
+        decide = (np.minimum(by_j, by_i) < self.config.goal_clearance) & (by_j != by_i)
         out = i_first.copy()
         kept = {}
         for k, q in enumerate(sel.tolist()):
@@ -146,7 +146,7 @@ class GoalClearance:
         """The yield rule's priorities (``i_first`` per pair ``ii[k], jj[k]``) where an agent held for the
         other one of a close pair is pushed by it (see ``push_margin`` in the module's docstring).
         ``before``: the pairs so decided on the last step; ``yielding``: as :meth:`_note_yields` left it."""
-        assert self.push_margin is not None  # checked by the caller
+        assert self.config.push_margin is not None  # checked by the caller
         out, kept = i_first.copy(), {}
         for q in np.flatnonzero(close).tolist():
             pair = (live[ii[q]], live[jj[q]])
@@ -154,7 +154,7 @@ class GoalClearance:
             for y, w in (pair, pair[::-1]):
                 held = yielding.get(y)
                 if first is None and held is not None and held[:2] == (w, self.index[y]) \
-                        and to_target.get(y, -math.inf) > held[2] + self.push_margin:
+                        and to_target.get(y, -math.inf) > held[2] + self.config.push_margin:
                     first = y
                     self.stats.pushed += 1
             if first is not None:

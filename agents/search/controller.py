@@ -63,6 +63,7 @@ import numpy as np
 
 from .advance import AdvanceRules
 from .clearance import GoalClearance, pair_proximity
+from .config import ControllerConfig
 from .ordering import OrderRules
 from .stats import ControllerStats
 
@@ -104,66 +105,25 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         distance: ``distance(obs[B, ...], goal[B, ...]) -> [B]`` predicted steps (closed-loop
             advance test).
         plans: agent name -> :class:`AgentPlan`.
-        reach_threshold: advance when the predicted distance to the waypoint is below this.
-        self_margin: also advance when the predicted distance is below the waypoint's predicted
-            distance to itself plus this (``None``: ``reach_threshold`` only). On the apartments
-            the shipped critics predict 1.2-3.5 steps from a panorama to itself.
-        settle_patience: also advance when the agent is within ``settle_slack`` predicted steps
-            of a waypoint's threshold and has not come closer (by a quarter step) for this many
-            steps: it is beside the waypoint, and a policy that does not close the last half
-            metre would otherwise hover there (``None``: off).
-        settle_slack: see ``settle_patience``.
+        config: the rules' settings (:class:`~agents.search.config.ControllerConfig`: reach
+            threshold, yield radius, unstick, fallback legs, ...); its ``hold`` and
+            ``park_clearance`` are read by the policy that makes the plans.
         fallback_policy: optional second ``policy(obs, goal) -> actions`` that drives an agent
             from the moment it is stuck ``skip_after`` times on the way to one target until it
             reaches the next waypoint (or, on its last leg, the goal).
-        safety_radius: yield when another agent is closer than this under ``proximity``
-            (``None`` disables yielding).
         proximity: ``proximity(obs_a[B, ...], obs_b[B, ...]) -> [B]`` distance between agents'
-            observations, in the same units as ``safety_radius`` (default: ``distance``,
-            symmetrised by taking the smaller direction).
+            observations, in the units of ``safety_radius`` (default: ``distance``, symmetrised
+            by taking the smaller direction).
         replan: optional ``replan(agent, obs, plan) -> AgentPlan``, called with the agent's
             current observation when it is stuck (see ``skip_after``) or more than
             ``replan_lag`` steps behind its plan; :attr:`index` still points at the target it
             failed to reach when it is called.
-        replan_lag: lag (steps since leaving the previous waypoint) that triggers ``replan``
-            (``None``: replan only when stuck).
-        stuck_window: steps over which an agent free to move counts as stuck when its
-            observation changed by less than ``stuck_tolerance`` (``None`` disables unsticking).
-        stuck_tolerance: mean absolute change of the observation over ``stuck_window`` steps
-            (``uint8`` images divided by 255) below which the agent is stuck. On the apartments a
-            step (0.25 m) changes a panorama by about 0.05, the jitter of an agent pressed against
-            a wall by under 0.01; on the 2D maps 0.01 is half a unit a step on a 55-unit map.
-        escape_steps: escape actions an agent takes once it is found stuck (doubled for every
-            further time it is stuck on the way to the same target, up to 8 times as many).
-        escape: ``"random"``: uniform random actions; ``"sidestep"``: the policy's action turned
-            by a right angle at full speed, left and right in turn from one escape to the next (a
-            policy that pushes into an obstacle it does not see, such as an agent parked on its
-            way, moves out of line with it); a random direction where the action is about zero.
-        sidestep_after: with ``escape="random"``, an agent found stuck more than this many times
-            in the episode sidesteps from then on (``None``: never): one pressed against furniture
-            again and again gets out of line with it.
-        skip_after: times an agent may be stuck on the way to one target before it replans
-            (or, without ``replan``, heads for the next waypoint).
-        seed: seed of the escape actions.
-        order_patience: steps an agent waits on a plan-order dependency while the agent it waits
-            on does not progress (no new target reached) before it stops waiting on it.
-        progress_patience: an agent free to move that comes no closer to its target (by the
-            critic, by a quarter step) for this many steps counts as stuck, too (``None``: off): a
-            policy that takes one place for another never stops long enough for ``stuck_window``.
         goal_order: optional ``goal_order(agent) -> [(other, r), ...]``, asked while ``agent``
             stands at its last waypoint: it sets off for its goal only once each ``other`` has
             reached its target ``r`` (or arrived), since ``other``'s route passes ``agent``'s
             goal. Asked afresh at every step (routes change when agents replan); waits as long as
             ``order_patience`` allows. An agent it holds so no longer waits for it by the plan's order.
-        goal_clearance, push_margin: see *clear goal* and *yield* above (predicted steps; ``None``: off).
-        advance_slack: see *advance* above (predicted steps; ``None``: off).
-        retreat: an agent whose leg is handed to ``fallback_policy`` goes back to the waypoint it
-            set off from first: ``"goal"`` on its leg to the goal, ``"any"`` on every leg but the
-            first (*back first* in :mod:`agents.search.advance`; ``None``: never).
-        fallback_beyond: a leg whose target ``distance`` puts beyond this many predicted steps at the
-            leg's start goes to ``fallback_policy`` at once, without waiting for the agent to be found
-            stuck (the plan made it one edge by another critic's reading, and the driver will not go
-            there); ``None``: off.
+        seed: seed of the escape actions.
     """
 
     def __init__(
@@ -171,84 +131,49 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         policy: PolicyFn,
         distance: PairFn,
         plans: Dict[str, AgentPlan],
-        reach_threshold: float = 2.0,
-        self_margin: Optional[float] = None,
-        settle_patience: Optional[int] = None,
-        settle_slack: float = 1.5,
+        config: Optional[ControllerConfig] = None,
+        *,
         fallback_policy: Optional[PolicyFn] = None,
-        safety_radius: Optional[float] = 3.0,
         proximity: Optional[PairFn] = None,
         replan: Optional[Callable[[str, np.ndarray, AgentPlan], AgentPlan]] = None,
-        replan_lag: Optional[int] = None,
-        stuck_window: Optional[int] = 4,
-        stuck_tolerance: float = 0.01,
-        escape_steps: int = 3,
-        escape: str = "random",
-        skip_after: int = 2,
-        seed: Optional[int] = 0,
-        order_patience: int = 40,
-        progress_patience: Optional[int] = None,
         goal_order: Optional[Callable[[str], List[Tuple[str, int]]]] = None,
-        goal_clearance: Optional[float] = None,
-        sidestep_after: Optional[int] = None,
-        push_margin: Optional[float] = None,
-        advance_slack: Optional[float] = None,
-        retreat: Optional[str] = None,
-        fallback_beyond: Optional[float] = None,
+        seed: Optional[int] = 0,
     ) -> None:
-        if stuck_window is not None and stuck_window < 1:
-            raise ValueError(f"stuck_window must be >= 1 or None, got {stuck_window!r}")
-        if escape_steps < 1 or skip_after < 1:
-            raise ValueError(f"escape_steps and skip_after must be >= 1, got {escape_steps!r}, {skip_after!r}")
+        config = ControllerConfig() if config is None else config
+        if not isinstance(config, ControllerConfig):
+            raise TypeError(f"config must be a ControllerConfig, got {type(config).__name__}")
+        #: the controller's settings
+        self.config = config
         self.policy = policy
         self.distance = distance
         self.plans = dict(plans)
-        self.reach_threshold = float(reach_threshold)
-        self.self_margin = None if self_margin is None else float(self_margin)
-        self.settle_patience = None if settle_patience is None else int(settle_patience)
-        self.settle_slack = float(settle_slack)
         self.fallback_policy = fallback_policy
+        self.proximity = proximity
+        self.replan = replan
+        self.goal_order = goal_order
+        self.rng = np.random.default_rng(seed)
         #: per agent: waypoints reached so far, and the count at which its fallback leg began
         self._reached = {a: 0 for a in self.plans}
         self._fallback_at: Dict[str, int] = {}
-        self.safety_radius = safety_radius
-        self.proximity = proximity
-        self.replan = replan
-        self.replan_lag = None if replan_lag is None else int(replan_lag)
-        self.stuck_window = stuck_window
-        self.stuck_tolerance = float(stuck_tolerance)
-        self.escape_steps = int(escape_steps)
-        if escape not in ("random", "sidestep"):
-            raise ValueError(f"escape must be 'random' or 'sidestep', got {escape!r}")
-        self.escape = escape
-        if sidestep_after is not None and sidestep_after < 0:
-            raise ValueError(f"sidestep_after must be >= 0 or None, got {sidestep_after!r}")
-        self.sidestep_after = sidestep_after
         #: per agent: times it was found stuck in the episode
         self._stuck_total = {a: 0 for a in self.plans}
         #: per agent: the action of its escape under way (sidestep), and the side of its last one
         self._escape_action: Dict[str, np.ndarray] = {}
         self._side = {a: 1.0 for a in self.plans}
-        self.skip_after = int(skip_after)
-        self.rng = np.random.default_rng(seed)
-        self._recent: Dict[str, Deque[np.ndarray]] = {a: deque(maxlen=(stuck_window or 0) + 1) for a in self.plans}
+        self._recent: Dict[str, Deque[np.ndarray]] = {a: deque(maxlen=(config.stuck_window or 0) + 1)
+                                                      for a in self.plans}
         self._escape = {a: 0 for a in self.plans}
         self._stuck_count = {a: 0 for a in self.plans}
         self.index = {a: 0 for a in self.plans}
         self._at_start = {a: p.starts_at_first and len(p.waypoints) > 0 for a, p in self.plans.items()}
         self._thresholds = {a: self._reach_thresholds(p) for a, p in self.plans.items()}
         self._progress: Dict[str, Tuple[int, float, int]] = {}
-        self.order_patience = int(order_patience)
-        if progress_patience is not None and progress_patience < 1:
-            raise ValueError(f"progress_patience must be >= 1 or None, got {progress_patience!r}")
-        self.progress_patience = progress_patience
         #: per agent: (target index, closest predicted distance, step it was last approached or held)
         self._best: Dict[str, Tuple[int, float, int]] = {}
         #: per agent: target index -> agents (with their target index) to wait for
         self._after = {a: {q: list(v) for q, v in (p.after or {}).items()} for a, p in self.plans.items()}
         #: per agent: (target it may not set off for, agent it waits on, since when, that one's index then)
         self._blocked: Dict[str, Tuple[int, str, int, int]] = {}
-        self.goal_order = goal_order
         #: per agent: the agents it no longer waits on before parking (its patience ran out)
         self._gave_up: Dict[str, set] = {a: set() for a in self.plans}
         #: agent -> the agent it holds its parking for (goal order), as of its last check
@@ -256,19 +181,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         self._waiting: Dict[str, str] = {}
         #: agents reported stuck from outside (a safety layer that kept them from moving), not yet handled
         self._reported: set = set()
-        for name, v in (("goal_clearance", goal_clearance), ("push_margin", push_margin)):
-            if v is not None and not v > 0:
-                raise ValueError(f"{name} must be > 0 or None, got {v!r}")
-        if advance_slack is not None and not advance_slack >= 0:
-            raise ValueError(f"advance_slack must be >= 0 or None, got {advance_slack!r}")
-        self.goal_clearance, self.push_margin, self.advance_slack = goal_clearance, push_margin, advance_slack
         self._onward: Dict[str, Tuple[AgentPlan, np.ndarray]] = {}
-        if retreat not in (None, "goal", "any"):
-            raise ValueError(f"retreat must be None, 'goal' or 'any', got {retreat!r}")
-        self.retreat = retreat
-        if fallback_beyond is not None and not fallback_beyond > 0:
-            raise ValueError(f"fallback_beyond must be > 0 or None, got {fallback_beyond!r}")
-        self.fallback_beyond = fallback_beyond
         #: per agent: the leg (plan, target index) whose start the ``fallback_beyond`` test has read
         self._leg_read: Dict[str, Tuple[AgentPlan, int]] = {}
         self._back: Dict[str, int] = {}
@@ -346,7 +259,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if not moved:
                 break
         self._waiting = waiting
-        if self.fallback_beyond is not None and self.fallback_policy is not None:
+        if self.config.fallback_beyond is not None and self.fallback_policy is not None:
             self._hand_over_far_legs(live, to_target)
         goals = np.stack([self.current_goal(a) for a in live])
         actions = np.asarray(self.policy(obs, goals), dtype=np.float32).reshape(len(live), -1)
@@ -372,9 +285,9 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
                 hold[i] = True
                 reason[i] = f"wait:{waiting[a]}"
                 self.stats.waits += 1
-        if self.goal_clearance is not None and len(live) > 1:
+        if self.config.goal_clearance is not None and len(live) > 1:
             self._clear_goals(live, obs, hold, reason, to_target)
-        if self.safety_radius is not None and len(live) > 1:
+        if self.config.safety_radius is not None and len(live) > 1:
             yielders = self._yield_mask(live, obs, ~hold, to_target)
             for i, w in yielders.items():
                 if not hold[i]:
@@ -382,13 +295,13 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
                 hold[i] = True
         self.stats.holding = {a: reason[i] for i, a in enumerate(live)}
         escaping: set = set()
-        if self.stuck_window is not None:
+        if self.config.stuck_window is not None:
             escaping = self._unstick(live, obs, hold, actions, to_target)
         actions[hold] = 0.0
         self.stats.activity = {a: self._activity(a, reason[i], a in escaping) for i, a in enumerate(live)}
-        if self.replan is not None and self.replan_lag is not None:
+        if self.replan is not None and self.config.replan_lag is not None:
             for i, a in enumerate(live):
-                if self._lag(a) > self.replan_lag:
+                if self._lag(a) > self.config.replan_lag:
                     self._replan(a, obs[i])
         self.t += 1
         self.stats.steps = self.t
@@ -438,7 +351,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
     def _no_progress(self, agent: str, d: Optional[float], held: bool) -> bool:
         """Whether ``agent`` has come no closer (by a quarter step) to its current target for
         ``progress_patience`` steps in which it was free to move (``False`` when that rule is off)."""
-        if self.progress_patience is None or d is None or not math.isfinite(d):
+        if self.config.progress_patience is None or d is None or not math.isfinite(d):
             return False
         k = self.index[agent]
         best = self._best.get(agent)
@@ -446,7 +359,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             self._best[agent] = (k, d, self.t)
         elif held:  # standing still on purpose does not count
             self._best[agent] = (k, best[1], self.t)
-        elif self.t - best[2] >= self.progress_patience:
+        elif self.t - best[2] >= self.config.progress_patience:
             self._best[agent] = (k, d, self.t)
             self.stats.stalls += 1
             return True
@@ -488,7 +401,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if not stalled:
                 if len(recent) < (recent.maxlen or 0):
                     continue
-                if float(np.abs(recent[-1] - recent[0]).mean()) >= self.stuck_tolerance:
+                if float(np.abs(recent[-1] - recent[0]).mean()) >= self.config.stuck_tolerance:
                     continue
             recent.clear()
             self.stats.escapes += 1
@@ -496,9 +409,9 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             self._stuck_count[a] += 1
             self._stuck_total[a] = self._stuck_total.get(a, 0) + 1
             # escapes grow with each consecutive one on the way to the same target (up to 8x)
-            self._escape[a] = self.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
+            self._escape[a] = self.config.escape_steps * 2 ** min(self._stuck_count[a] - 1, 3) - 1
             k = self.index[a]
-            if self._stuck_count[a] >= self.skip_after:
+            if self._stuck_count[a] >= self.config.skip_after:
                 if self.fallback_policy is not None and self._fallback_at.get(a) != self._reached[a]:
                     self._fallback_at[a] = self._reached[a]  # hand this leg over first
                     self._go_back(a)
@@ -521,7 +434,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
     def _hand_over_far_legs(self, live: List[str], to_target: Dict[str, float]) -> None:
         """Hand a leg to ``fallback_policy`` from its start where the driver's critic puts its target
         beyond ``fallback_beyond`` (the graph's critic made it one edge: the driver will not go there)."""
-        assert self.fallback_beyond is not None
+        assert self.config.fallback_beyond is not None
         for a in live:
             plan, k = self.plans[a], self.index[a]
             d = to_target.get(a)
@@ -529,15 +442,15 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if a in self._back or d is None or read is not None and read[0] is plan and read[1] == k:
                 continue
             self._leg_read[a] = (plan, k)
-            if d > self.fallback_beyond and self._fallback_at.get(a) != self._reached[a]:
+            if d > self.config.fallback_beyond and self._fallback_at.get(a) != self._reached[a]:
                 self._fallback_at[a] = self._reached[a]
                 self.stats.handovers += 1
 
     def _sidesteps(self, agent: str) -> bool:
         """Whether ``agent``'s escapes are sidesteps (see ``escape`` and ``sidestep_after``)."""
-        if self.escape == "sidestep":
+        if self.config.escape == "sidestep":
             return True
-        return self.sidestep_after is not None and self._stuck_total.get(agent, 0) > self.sidestep_after
+        return self.config.sidestep_after is not None and self._stuck_total.get(agent, 0) > self.config.sidestep_after
 
     def _escape_step(self, agent: str, action: np.ndarray) -> np.ndarray:
         """The escape action of ``agent`` now, given the action its policy would take (see ``escape``)."""
@@ -566,16 +479,16 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         ii, jj = ii[both], jj[both]
         if len(ii) == 0:
             return {}
-        assert self.safety_radius is not None  # checked by the caller
-        close = pair_proximity(self.distance, self.proximity, obs[ii], obs[jj]) < self.safety_radius
+        assert self.config.safety_radius is not None  # checked by the caller
+        close = pair_proximity(self.distance, self.proximity, obs[ii], obs[jj]) < self.config.safety_radius
         if not close.any():
             return {}
         lag = np.array([self._lag(a) for a in live])
         # the agent further behind its plan has priority; ties go to the lower index
         i_first = (lag[ii] > lag[jj]) | ((lag[ii] == lag[jj]) & (ii < jj))
-        if self.goal_clearance is not None:
+        if self.config.goal_clearance is not None:
             i_first = self._goal_first(live, obs, ii, jj, close, i_first, before)
-        if self.push_margin is not None:
+        if self.config.push_margin is not None:
             i_first = self._push_first(live, ii, jj, close, i_first, to_target, pushed, yielding)
         loser = np.where(i_first, jj, ii)[close]
         winner = np.where(i_first, ii, jj)[close]
@@ -585,7 +498,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             if w not in hold and yielder not in hold:
                 hold[yielder] = w
         self.stats.yields += len(hold)
-        if self.push_margin is not None:
+        if self.config.push_margin is not None:
             self._note_yields(live, hold, to_target, yielding)
         return hold
 

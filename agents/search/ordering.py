@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
+from .config import ControllerConfig
+
 
 def hold_cycle(agent: str, first: str, holds: Callable[[str], Optional[str]], limit: int) -> Optional[List[str]]:
     """The agents from ``first`` on whose holds (``holds(x)``: the agent ``x`` stands still for, or
@@ -46,7 +48,7 @@ class OrderRules:
     plans: Dict[str, Any]
     index: Dict[str, int]
     t: int
-    order_patience: int
+    config: ControllerConfig
     goal_order: Optional[Callable[[str], List[Tuple[str, int]]]]
     _after: Dict[str, Dict[int, List[Tuple[str, int]]]]
     _blocked: Dict[str, Tuple[int, str, int, int]]
@@ -91,7 +93,7 @@ class OrderRules:
         if seen is None or seen[:2] != (q, b) or self.index[b] != seen[3]:
             self._blocked[agent] = (q, b, self.t, self.index[b])
             return False
-        if self.t - seen[2] >= self.order_patience:  # it does not progress: stop waiting on it
+        if self.t - seen[2] >= self.config.order_patience:  # it does not progress: stop waiting on it
             self._blocked.pop(agent, None)
             return True
         return False

@@ -25,31 +25,21 @@ import torch; the models are only called through ``predict``, ``distance`` and `
 """
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from ..run_folder import read_npz
+from .config import OPTIONS, ControllerConfig, ReplanConfig, SearchConfig, UnknownOptionError, preset_for
 from .controller import AgentPlan, WaypointController
 from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
 from .graph import NodePairwise, ProblemGraph, check_graph_nodes, env_record
-from .models import (
-    buffer_observations,
-    check_models,
-    default_controller_options,
-    default_hold,
-    default_reach_threshold,
-    default_second_opinion,
-    distance_fn,
-    env_observations,
-    policy_fn,
-)
+from .models import buffer_observations, check_models, default_second_opinion, distance_fn, env_observations, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
 from .repair import EdgeMemory
 from .replanning import StuckReplanning
@@ -57,28 +47,34 @@ from .safety import SafetyLayer, SafetyState
 from .stats import ControllerStats
 from .waypoints import direct_plans
 
-
-class UnknownOptionError(ValueError, TypeError):
-    """Options that neither :class:`BufferPlanner` nor the policy takes (a ``ValueError``, and a
-    ``TypeError`` as for an unknown keyword argument)."""
-
-
-def planner_option_names() -> List[str]:
-    """The options of :class:`BufferPlanner` (its keyword arguments besides nodes, matrices and critic)."""
-    return sorted(set(inspect.signature(BufferPlanner.__init__).parameters)
-                  - {"self", "observations", "D", "C", "pairwise"})
+#: :meth:`SearchPolicy.from_models`' and :meth:`SearchPolicy.load`'s marker of an argument not given
+_DEFAULT: Any = object()
+#: keyword arguments of :class:`SearchPolicy` that ``from_models`` and ``load`` pass on (not config options)
+_POLICY_ARGUMENTS = ("distance_model", "deterministic", "fallback_model", "memory", "safety")
 
 
-def _split_options(cls: type, options: Dict[str, Any]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
-    """``options`` split into those of :class:`BufferPlanner` and those of the policy class ``cls``;
-    :class:`UnknownOptionError` names the unknown ones and lists the valid ones."""
-    planner = set(planner_option_names())
-    policy = set(inspect.signature(cls.__init__).parameters) - {"self", "planner", "policy_model"}  # type: ignore
-    unknown = set(options) - planner - policy
+def _saved_config(path: Union[str, Path], text: Any, key: str) -> SearchConfig:
+    """The graph and solver configs a saved graph file holds under ``key`` (JSON: the nested configs,
+    or, under ``planner_options``, the planner's options by name); errors name ``path``."""
+    try:
+        data = json.loads(str(text))
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: its {key} are not JSON ({e})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: its {key} are not a JSON object")
+    if key == "planner_config":
+        extra = sorted(set(data) - {"graph", "solver"})
+        if extra:
+            raise ValueError(f"{path}: its planner config has parts {extra}; a planner has 'graph' and 'solver'")
+        return SearchConfig.from_dict(data, where=str(path))
+    planner = sorted(k for k, (part, _) in OPTIONS.items() if part in ("graph", "solver"))
+    unknown = sorted(set(data) - set(planner))
     if unknown:
-        raise UnknownOptionError(f"unknown options {sorted(unknown)}; planner options: {sorted(planner)}; "
-                                 f"policy options: {sorted(policy)}")
-    return {k: v for k, v in options.items() if k in planner}, {k: v for k, v in options.items() if k in policy}
+        raise ValueError(f"{path}: its planner options {unknown} are not options of the planner; valid: {planner}")
+    try:
+        return SearchConfig().updated(**data)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 @dataclass(frozen=True)
@@ -109,43 +105,13 @@ class SearchPolicy(StuckReplanning):
             critic (``distance``) decides when a waypoint is reached, unless ``distance_model``
             is given.
         distance_model: optional model whose ``distance`` replaces the driver's.
+        controller: how the agents follow their plans (:class:`~agents.search.config.ControllerConfig`);
+            ``None``: that of :func:`~agents.search.config.preset_for` the model that judges waypoints
+            (``"panorama"`` or ``"vector"``).
+        replanning: what a stuck agent's new plan keeps clear of
+            (:class:`~agents.search.config.ReplanConfig`; ``None``: the defaults).
         budget: optional bound on each agent's total predicted route cost
             (:meth:`BufferPlanner.plan`).
-        hold: how the agents keep to the plan. ``"order"``: in the plan's order, not on the
-            clock: an agent sets off for a place the plan sends another agent through first only
-            once that one has got far enough (:mod:`agents.search.dependencies`; an agent that is
-            slower than planned delays the others instead of meeting them), and an agent parks at
-            its goal only once the agents whose routes still pass it have gone by
-            (:func:`~agents.search.dependencies.goal_passers`). ``"waits"`` (an early
-            agent waits for its planned departure time where CBS made it wait) or ``"all"`` (at
-            every waypoint): on the clock. Default :func:`default_hold` of the judging model:
-            ``"order"`` for panorama agents, ``"waits"`` for vector ones.
-        reach_threshold: a waypoint is reached at a predicted distance below this (steps);
-            default :func:`default_reach_threshold` of the model that judges it.
-        safety_radius: agents closer than this (predicted steps) yield to each other.
-        replan_when_stuck: an agent stuck twice on the way to one waypoint gets a new single-agent
-            plan from where it stands, around that waypoint and the nodes within ``ban_radius``
-            predicted steps of it (a buffer graph has many nodes at almost the same place, and a
-            critic that misjudged one edge misjudges their edges too), clear of agents parked at
-            their goals, or localised; the edge it failed on is recorded in ``memory``. The steps:
-            :mod:`agents.search.replanning`.
-        ban_radius: see ``replan_when_stuck``.
-        ban_detour: where keeping clear of the failed waypoint's neighbourhood makes a stuck agent's new
-            route more than this many predicted steps longer than keeping clear of that waypoint alone,
-            the replan keeps clear of the waypoint alone (a doorway holds several nodes, and the one
-            the agent failed on may lie against the wall's end); ``inf`` (the default): never. Where
-            the agent failed at a wormhole, the failed node's neighbours are look-alikes too, and
-            a narrow replan sends it to the next one (see :mod:`agents.search.replanning`).
-        repair_routes: an agent about to set off along an edge that another agent failed on in this
-            episode (or that the memory removed meanwhile) plans anew from where it stands first (see
-            :mod:`agents.search.replanning`); off by default: on the validation problems it saves
-            little cost and loses runs (see the planning docs).
-        detach_radius: where an agent set off for a node (or its goal) as one edge away and the
-            critic now puts it far, the nodes within this many predicted steps of that node (of the
-            node it set off from) are no longer linked to its start (its goal) in its replans of the
-            episode (``None``: never); see :mod:`agents.search.replanning`.
-        park_clearance: with ``hold="order"``, agents also park after those their goal would shut
-            out (:func:`~agents.search.dependencies.shut_out`, this many predicted steps); ``None``: off.
         seed: seed of the controller's escape actions (each episode starts from it).
         deterministic: drive with the deterministic policy (default).
         fallback_model: optional second checkpoint that drives an agent's leg once the policy
@@ -154,8 +120,6 @@ class SearchPolicy(StuckReplanning):
             controller hands the legs its driver reads beyond ``fallback_beyond`` to it at once and
             the planner's ``second_opinion`` is the driver's critic, the planner plans no such leg (its
             ``max_leg``, unless set; ``inf`` keeps them).
-        controller_kwargs: more options of :class:`WaypointController` (``stuck_window``,
-            ``escape_steps``, ...), over :func:`default_controller_options` of the judging model.
         memory: the :class:`~agents.search.repair.EdgeMemory` of the graph (default: a new, empty
             one): every plan leaves out the edges it removed, and it learns from every episode
             unless frozen (``memory.frozen = True``; an evaluation learns on validation problems
@@ -164,6 +128,13 @@ class SearchPolicy(StuckReplanning):
             that no two agents touch (e.g. ``SafetyLayer.for_env(env)``); it reads the team's shared
             positions, which :meth:`predict` then needs (``positions=team_positions(env)``).
             ``None``: actions go to the env as the controller makes them.
+
+    How the agents keep to the plan is the controller config's ``hold``: ``"order"`` (the plan's
+    order, not its clock: an agent sets off for a place the plan sends another agent through first
+    only once that one has got far enough, :mod:`agents.search.dependencies`, and parks at its goal
+    only once the agents whose routes still pass it have gone by,
+    :func:`~agents.search.dependencies.goal_passers`), ``"waits"`` or ``"all"`` (on the clock).
+    A stuck agent's replan (the ``replanning`` part) is described in :mod:`agents.search.replanning`.
     """
 
     def __init__(
@@ -171,69 +142,44 @@ class SearchPolicy(StuckReplanning):
         planner: Optional[BufferPlanner],
         policy_model: Any,
         distance_model: Any = None,
-        *,
+        controller: Optional[ControllerConfig] = None,
+        replanning: Optional[ReplanConfig] = None,
         budget: Optional[float] = None,
-        hold: Optional[str] = None,
-        reach_threshold: Optional[float] = None,
-        safety_radius: Optional[float] = 2.0,
-        replan_when_stuck: bool = True,
-        ban_radius: float = 3.0,
-        ban_detour: float = math.inf,
-        repair_routes: bool = False,
-        detach_radius: Optional[float] = 3.0,
-        park_clearance: Optional[float] = None,
+        *,
         seed: Optional[int] = 0,
         deterministic: bool = True,
         fallback_model: Any = None,
-        controller_kwargs: Optional[Dict[str, Any]] = None,
         memory: Optional[EdgeMemory] = None,
         safety: Optional[SafetyLayer] = None,
     ) -> None:
         judge = distance_model if distance_model is not None else policy_model
-        hold = default_hold(judge) if hold is None else hold
-        if hold not in ("order", "all", "waits"):
-            raise ValueError(f"hold must be 'order', 'all' or 'waits', got {hold!r}")
-        if reach_threshold is None:
-            reach_threshold = default_reach_threshold(judge)
-        if not reach_threshold > 0:
-            raise ValueError(f"reach_threshold must be > 0, got {reach_threshold!r}")
-        if budget is not None and not budget > 0:
-            raise ValueError(f"budget must be > 0 or None, got {budget!r}")
         if not hasattr(policy_model, "predict"):
             raise TypeError(f"the driving model needs a predict() method, got {type(policy_model).__name__}")
         if fallback_model is not None and not hasattr(fallback_model, "predict"):
             raise TypeError(f"the fallback model needs a predict() method, got {type(fallback_model).__name__}")
         if not hasattr(judge, "distance"):
             raise TypeError("the model that judges waypoints reached needs a distance() method")
+        controller = preset_for(judge).controller if controller is None else controller
+        replanning = ReplanConfig() if replanning is None else replanning
+        for name, value, cls in (("controller", controller, ControllerConfig),
+                                 ("replanning", replanning, ReplanConfig)):
+            if not isinstance(value, cls):
+                raise TypeError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
+        config = SearchConfig(controller=controller, replanning=replanning, budget=budget)
+        beyond = config.controller.fallback_beyond
+        if (planner is not None and fallback_model is not None and beyond is not None
+                and planner.graph.max_leg is None and getattr(planner.second_opinion, "model", None) is judge):
+            planner = planner.with_options(max_leg=beyond)  # such a leg would go to the fallback at once
         self.planner = planner
+        #: the settings in use (the planner's graph and solver, the controller, replanning, the budget)
+        self.config = config if planner is None else replace(config, graph=planner.graph, solver=planner.solver_config)
         self.policy_model = policy_model
         self.distance_model = judge
-        self.budget = budget
-        self.hold = hold
-        self.reach_threshold = float(reach_threshold)
-        self.safety_radius = safety_radius
         if safety is not None and not isinstance(safety, SafetyLayer):
             raise TypeError(f"safety must be a SafetyLayer or None, got {type(safety).__name__}")
         self.safety = safety
-        self.replan_when_stuck = bool(replan_when_stuck)
-        self.ban_radius = float(ban_radius)
-        if not ban_detour >= 0:
-            raise ValueError(f"ban_detour must be >= 0 (inf: never), got {ban_detour!r}")
-        self.ban_detour = float(ban_detour)
-        self.repair_routes = bool(repair_routes)
-        if detach_radius is not None and not detach_radius >= 0:
-            raise ValueError(f"detach_radius must be >= 0 or None, got {detach_radius!r}")
-        self.detach_radius = detach_radius
-        if park_clearance is not None and not park_clearance > 0:
-            raise ValueError(f"park_clearance must be > 0 or None, got {park_clearance!r}")
-        self.park_clearance = None if park_clearance is None else float(park_clearance)
         self.seed = seed
         self.deterministic = bool(deterministic)
-        self.controller_kwargs = {**default_controller_options(judge), **(controller_kwargs or {})}
-        beyond = self.controller_kwargs.get("fallback_beyond")
-        if (planner is not None and fallback_model is not None and beyond is not None and planner.max_leg is None
-                and getattr(planner.second_opinion, "model", None) is judge):
-            self.planner = planner.with_options(max_leg=beyond)  # such a leg would go to the fallback at once
         self.fallback_model = fallback_model
         self._policy = policy_fn(policy_model, deterministic=self.deterministic)
         self._fallback = None if fallback_model is None else policy_fn(fallback_model, deterministic=self.deterministic)
@@ -258,7 +204,9 @@ class SearchPolicy(StuckReplanning):
         seed: int = 0,
         aggregate: str = "max",
         sparsify: Optional[float] = None,
-        **options: Any,
+        config: Optional[SearchConfig] = None,
+        second_opinion: Any = _DEFAULT,
+        **kwargs: Any,
     ) -> "SearchPolicy":
         """Build the graph with ``critic`` and drive with ``driver`` (default: the critic).
 
@@ -270,17 +218,23 @@ class SearchPolicy(StuckReplanning):
                 ``n_nodes`` of them from; ``None`` draws ``n_nodes`` random free states of the
                 critic's environment (``critic.env_id``) and renders their observations.
             n_nodes: graph size when ``nodes`` is a replay buffer or ``None``.
-            seed: seed of the node draw (and of the controller, unless ``options`` has one).
+            seed: seed of the node draw and of the controller.
             aggregate: ensemble aggregation of the critic (``"max"``: pessimistic).
             sparsify: merge nodes the critic cannot tell apart, as starts and as goals, within
                 this many steps (two-way consistency, :meth:`BufferPlanner.sparsified`); ``None``:
                 keep every node.
-            options: :class:`BufferPlanner` options (``d_max``, ``c_max``,
-                ``proximity_radius``, ``suboptimality``, ``time_limit``, ...) and
-                :class:`SearchPolicy` options (``budget``, ``hold``, ``reach_threshold``, ...).
+            config: the settings (default: :func:`~agents.search.config.preset_for` the driver).
+            second_opinion: the planner's second critic (default:
+                :func:`~agents.search.models.default_second_opinion` of the two models).
+            kwargs: options of the config by name (:data:`~agents.search.config.OPTIONS`: ``c_max``,
+                ``hold``, ``solver``, ...), applied to ``config``, and the constructor's keyword
+                arguments (``fallback_model``, ``safety``, ``memory``, ``deterministic``,
+                ``distance_model``). :attr:`config` of the result is the config in use.
         """
         check_models(critic, driver)
-        planner_options, kwargs = _split_options(cls, options)
+        own = {k: kwargs.pop(k) for k in _POLICY_ARGUMENTS if k in kwargs}
+        judge = own.get("distance_model") or driver or critic
+        config = (preset_for(judge) if config is None else config).updated(**kwargs)
         if n_nodes < 2:
             raise ValueError(f"n_nodes must be >= 2, got {n_nodes}")
         if nodes is None:
@@ -293,19 +247,22 @@ class SearchPolicy(StuckReplanning):
             obs = buffer_observations(nodes, n_nodes, np.random.default_rng(seed))
         else:
             obs = np.asarray(nodes)
-        planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
-        planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate, **planner_options)
+        opinion = default_second_opinion(critic, driver) if second_opinion is _DEFAULT else second_opinion
+        planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate, graph=config.graph, solver=config.solver,
+                                           second_opinion=opinion)
         if sparsify is not None:
             planner, _ = planner.sparsified(sparsify)
-        kwargs.setdefault("seed", seed)
-        return cls(planner, driver if driver is not None else critic, **kwargs)
+        own.setdefault("seed", seed)
+        return cls(planner, driver if driver is not None else critic, controller=config.controller,
+                   replanning=config.replanning, budget=config.budget, **own)
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: Union[str, Path]) -> Path:
-        """Write the graph (node observations, ``D``, ``C``, the planner's options) and what it learned
-        (:attr:`memory`) to ``path`` (``.npz``), with the environment of the critic that made ``D``
-        and ``C`` and the shape of one observation; :meth:`load` reads it back with the models and
-        checks them against this record."""
+        """Write the graph (node observations, ``D``, ``C``, the planner's graph and solver configs)
+        and what it learned (:attr:`memory`) to ``path`` (``.npz``), with the environment of the
+        critic that made ``D`` and ``C`` and the shape of one observation; :meth:`load` reads it
+        back with the models and checks them against this record. The configs are JSON: loading
+        a file runs no code from it."""
         if self.planner is None:
             raise ValueError("this SearchPolicy has no planner, hence no graph to save")
         p = self.planner
@@ -314,28 +271,34 @@ class SearchPolicy(StuckReplanning):
         env_id = next((getattr(m, "env_id", None) for m in (critic, self.distance_model, self.policy_model)
                        if getattr(m, "env_id", None)), None)
         arrays: Dict[str, Any] = dict(observations=p.observations, D=p.D, C=p.C,
-                                      planner_options=np.array(json.dumps(p.options())), **self.memory.arrays())
+                                      planner_config=np.array(json.dumps(p.config())), **self.memory.arrays())
         arrays.update(env_record(p.observations, env_id))
         np.savez_compressed(path, **arrays)
         return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
     @classmethod
     def load(cls, path: Union[str, Path], critic: Any, driver: Any = None, *, aggregate: str = "max",
-             **options: Any) -> "SearchPolicy":
+             config: Optional[SearchConfig] = None, second_opinion: Any = _DEFAULT,
+             **kwargs: Any) -> "SearchPolicy":
         """A policy over the graph :meth:`save` wrote, with its edge memory.
 
         ``critic`` attaches start and goal observations to the graph (the model whose critics made
-        ``D`` and ``C``), ``driver`` drives (default: the critic); ``options`` override saved planner
-        options (``c_max``, ...) and set :class:`SearchPolicy` options, as in :meth:`from_models`.
+        ``D`` and ``C``), ``driver`` drives (default: the critic). The settings are the file's graph
+        and solver configs with the controller and replanning of
+        :func:`~agents.search.config.preset_for` the driver, or ``config`` whole where given;
+        ``kwargs`` change options of them by name and set the constructor's keyword arguments, as in
+        :meth:`from_models`.
 
         The file is read whole and checked: a missing, truncated or corrupt file, matrices that do
-        not fit the nodes, saved planner options the planner does not take, node observations that
-        are not finite or lie outside the critic's observation space, and a file made on another
-        environment than the models' (files that record one) raise ``ValueError`` naming ``path``.
+        not fit the nodes, saved configs with fields the planner does not have, node observations
+        that are not finite or lie outside the critic's observation space, and a file made on
+        another environment than the models' (files that record one) raise ``ValueError`` naming
+        ``path``.
         """
-        planner_options, kwargs = _split_options(cls, options)
+        own = {k: kwargs.pop(k) for k in _POLICY_ARGUMENTS if k in kwargs}
         f = read_npz(path, "saved SearchPolicy graph")
-        missing = [k for k in ("observations", "D", "C", "planner_options") if k not in f]
+        settings = "planner_config" if "planner_config" in f else "planner_options"
+        missing = [k for k in ("observations", "D", "C", settings) if k not in f]
         if missing:
             raise ValueError(f"{path} is not a saved SearchPolicy graph: it lacks {missing}")
         obs, D, C = f["observations"], f["D"], f["C"]
@@ -346,16 +309,7 @@ class SearchPolicy(StuckReplanning):
                                  f"got {m.shape} {m.dtype}")
             if not np.isfinite(m).all() or (m < 0).any():
                 raise ValueError(f"{path}: {name} must be finite and non-negative")
-        try:
-            saved = json.loads(str(f["planner_options"]))
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: its planner options are not JSON ({e})") from None
-        if not isinstance(saved, dict):
-            raise ValueError(f"{path}: its planner options are not a JSON object")
-        unknown = sorted(set(saved) - set(planner_option_names()))
-        if unknown:
-            raise ValueError(f"{path}: its planner options {unknown} are not options of the planner; "
-                             f"valid: {planner_option_names()}")
+        saved = _saved_config(path, f[settings], settings)
         try:
             memory = EdgeMemory.from_arrays(f)
         except ValueError as e:
@@ -363,12 +317,18 @@ class SearchPolicy(StuckReplanning):
         if memory.n_nodes != len(obs):
             raise ValueError(f"{path}: its edge memory is of {memory.n_nodes} nodes, its graph has {len(obs)}")
         check_graph_nodes(path, f, obs, models=(critic, driver))
-        planner_options.setdefault("second_opinion", default_second_opinion(critic, driver))
-        if planner_options["second_opinion"] is None:
-            saved.pop("max_leg", None)  # nothing to read legs with
-        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), **{**saved, **planner_options})
-        kwargs.setdefault("memory", memory)
-        return cls(planner, driver if driver is not None else critic, **kwargs)
+        judge = own.get("distance_model") or driver or critic
+        if config is None:
+            config = replace(preset_for(judge), graph=saved.graph, solver=saved.solver)
+        opinion = default_second_opinion(critic, driver) if second_opinion is _DEFAULT else second_opinion
+        if opinion is None and saved.graph.max_leg is not None and config.graph is saved.graph:
+            config = replace(config, graph=replace(config.graph, max_leg=None))  # nothing to read legs with
+        config = config.updated(**kwargs)
+        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), config.graph, config.solver,
+                                second_opinion=opinion)
+        own.setdefault("memory", memory)
+        return cls(planner, driver if driver is not None else critic, controller=config.controller,
+                   replanning=config.replanning, budget=config.budget, **own)
 
     # ------------------------------------------------------------------ episode state
     def reset(self, seed: Optional[int] = None) -> None:
@@ -482,7 +442,8 @@ class SearchPolicy(StuckReplanning):
         assert self.controller is not None
         self._last_obs.update(current)
         self._last_names = set(current)
-        if self.repair_routes and self.planner is not None and self.replan_when_stuck:
+        replanning = self.config.replanning
+        if replanning.repair_routes and self.planner is not None and replanning.replan_when_stuck:
             self._repair_routes(current)
         actions = self.controller.act(current)
         if self.safety is not None and not single:
@@ -578,29 +539,31 @@ class SearchPolicy(StuckReplanning):
         self.planning_time = time.perf_counter() - t0
         self.agents = names
         self._goals = dict(goals)
-        replan = self._replan_stuck if self.planner is not None and self.replan_when_stuck else None
-        goal_order = self._goal_blockers if self.hold == "order" and self.planner is not None else None
-        self.controller = WaypointController(self._policy, self._distance, plans,
-                                             reach_threshold=self.reach_threshold, safety_radius=self.safety_radius,
+        searching = self.planner is not None
+        replan = self._replan_stuck if searching and self.config.replanning.replan_when_stuck else None
+        goal_order = self._goal_blockers if searching and self.config.controller.hold == "order" else None
+        self.controller = WaypointController(self._policy, self._distance, plans, self.config.controller,
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
-                                             goal_order=goal_order, **self.controller_kwargs)
+                                             goal_order=goal_order)
 
     def _plan(self, starts: np.ndarray, goals: np.ndarray) -> MultiAgentPlan:
         """A joint plan without the edges the memory removed; where that leaves an agent without any
         route (the removed edges were the only way), with them."""
         assert self.planner is not None
         removed = self.memory.removed()
-        plan = self.planner.plan(starts, goals, budget=self.budget, exclude_edges=removed)
+        budget = self.config.budget
+        plan = self.planner.plan(starts, goals, budget=budget, exclude_edges=removed)
         if len(removed) and plan.status == "infeasible":
-            plan = self.planner.plan(starts, goals, budget=self.budget)
+            plan = self.planner.plan(starts, goals, budget=budget)
         return plan
 
     def _agent_plans(self, plan: MultiAgentPlan, names: List[str]) -> Dict[str, AgentPlan]:
         """The controller's plans of a solved plan, kept by the clock or in the plan's order (``hold``)."""
-        if self.hold != "order":
-            return plan.agent_plans(names, hold=self.hold)
+        hold = self.config.controller.hold
+        if hold != "order":
+            return plan.agent_plans(names, hold=hold)
         plans = plan.agent_plans(names, hold="waits")
-        radius = self.planner.proximity_radius if self.planner is not None else None
+        radius = self.planner.graph.proximity_radius if self.planner is not None else None
         problem = plan.problem
         if radius is None or problem is None or len(names) < 2:
             return {a: AgentPlan(p.waypoints, p.goal, None, p.starts_at_first) for a, p in plans.items()}
@@ -628,11 +591,12 @@ class SearchPolicy(StuckReplanning):
         others = {b: (self.routes.get(b, []), *self._route_graph[b][:2], self.controller.index.get(b, 0))
                   for b in self.agents if b != agent and b in self._route_graph}
         problem, goal, _ = self._route_graph[agent]
-        out = goal_passers(problem, goal, others, float(self.planner.proximity_radius or 0.0))
-        if self.park_clearance is not None:
+        out = goal_passers(problem, goal, others, float(self.planner.graph.proximity_radius or 0.0))
+        clearance = self.config.controller.park_clearance
+        if clearance is not None:
             under_way = {b: v for b, v in others.items() if b in self._last_names and b not in dict(out)}
-            out += shut_out(problem, goal, under_way, self.park_clearance, self._cut_cache)
+            out += shut_out(problem, goal, under_way, clearance, self._cut_cache)
         return out
 
 
-__all__ = ["Leg", "SearchPolicy", "UnknownOptionError", "planner_option_names"]
+__all__ = ["Leg", "SearchPolicy", "UnknownOptionError"]

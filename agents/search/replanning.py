@@ -44,6 +44,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from .config import SearchConfig
 from .controller import AgentPlan
 from .dependencies import nodes_near
 from .repair import edges_near, near_either_way, past_failed_waypoints
@@ -59,14 +60,10 @@ class StuckReplanning:
     planner: Any
     controller: Any
     memory: Any
-    budget: Optional[float]
-    ban_radius: float
-    ban_detour: float
+    config: SearchConfig
     narrow_replans: int
-    repair_routes: bool
     route_repairs: int
     _leg_checked: Dict[str, Tuple[AgentPlan, int]]
-    detach_radius: Optional[float]
     agents: List[str]
     routes: Dict[str, List[int]]
     replan_time: float
@@ -95,12 +92,12 @@ class StuckReplanning:
         arrived (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
         parked = [self._route_graph[b][:2] for b in self.agents
                   if b != agent and b not in self._last_names and b in self._route_graph]
-        r = share * self.ban_radius
+        r = share * self.config.replanning.ban_radius
         return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, r))]
 
     def _straight(self, problem: Any) -> Callable[[int, int], float]:
         """The critic's distance between two nodes of ``problem``: exact where its ``D`` holds only a bound."""
-        d_max = self.planner.d_max
+        d_max = self.planner.graph.d_max
 
         def straight(u: int, w: int) -> float:
             d = float(problem.D[u, w])
@@ -116,15 +113,15 @@ class StuckReplanning:
         p = self.planner
         goal = self._goals[agent]
         to = p.observations[[target]] if target is not None else goal[None]
-        if source is None and target is None or float(self._distance(ob[None], to)[0]) < 2 * p.d_max:
+        if source is None and target is None or float(self._distance(ob[None], to)[0]) < 2 * p.graph.d_max:
             return
-        assert self.detach_radius is not None  # checked by the caller
+        assert self.config.replanning.detach_radius is not None  # checked by the caller
         if target is not None:  # no more from its start to the target or the nodes beside it
-            near = near_either_way(p.D, target, self.detach_radius)
+            near = near_either_way(p.D, target, self.config.replanning.detach_radius)
             self._detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [target])
         else:  # no more to its goal from the source or the nodes beside it
             assert source is not None
-            near = near_either_way(p.D, source, self.detach_radius)
+            near = near_either_way(p.D, source, self.config.replanning.detach_radius)
             self._goal_detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [source])
 
     def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
@@ -137,15 +134,16 @@ class StuckReplanning:
         route = self.routes[agent]
         leg = self.leg(agent)
         if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
-            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, self.ban_radius))
+            radius = self.config.replanning.ban_radius
+            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, radius))
             self.memory.record_failure(leg.source, leg.target)
-        if leg is not None and self.detach_radius is not None:
+        if leg is not None and self.config.replanning.detach_radius is not None:
             self._detach(agent, ob, leg.source, leg.target)
         # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
         # nodes right by it
         f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
         if f < n_nodes:
-            near = near_either_way(p.D, f, self.ban_radius)
+            near = near_either_way(p.D, f, self.config.replanning.ban_radius)
             self._failed[agent].append(f)
             self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
         attempts, plans = self._attempts(agent)
@@ -193,7 +191,7 @@ class StuckReplanning:
         at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
 
         def attempt(exclude, exclude_edges, avoid, detach) -> Any:
-            return p.plan(ob[None], self._goals[agent][None], budget=self.budget, exclude=exclude,
+            return p.plan(ob[None], self._goals[agent][None], budget=self.config.budget, exclude=exclude,
                           exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
                           detached=detach[0], goal_detached=detach[1])
 
@@ -210,10 +208,10 @@ class StuckReplanning:
             if sub.solved:
                 # around the neighbourhood, unless around the failed waypoints alone (the next attempt) is
                 # much shorter
-                if math.isfinite(self.ban_detour) and j in narrow:
+                if math.isfinite(self.config.replanning.ban_detour) and j in narrow:
                     alt = attempt(*attempts[j + 1][1:])
                     if alt.solved and alt.soc is not None and sub.soc is not None \
-                            and alt.soc + self.ban_detour < sub.soc:
+                            and alt.soc + self.config.replanning.ban_detour < sub.soc:
                         sub, banned = alt, attempts[j + 1][0]
                         self.narrow_replans += 1
                 break

@@ -6,10 +6,11 @@ import json
 import math
 import sys
 import time
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Tuple
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from agents.search.mapf import SPREAD_MODES
     from baselines.cli import add_map_argument
     from baselines.evaluation import DIFFICULTIES
     from baselines.methods import DEFAULT_METHODS, MARL_METHODS, METHODS, PAPER_METHODS
@@ -39,10 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="MAPPO-Lagrangian policy of the mappo_lag method (default: the shipped one for --env)")
     p.add_argument("--seed", type=_non_negative, default=0, help="seed of the graph nodes and the problems")
     p.add_argument("--nodes", type=_positive, default=1000, help="buffer graph nodes (default 1000)")
-    p.add_argument("--c-max", type=_c_max, default=None,
-                   help="edge cost cut-off of the constrained searches: a number, or 'auto' to choose it per "
-                        "agent count on validation problems drawn with --validation-seed (never the test "
-                        "problems) from --c-max-grid (default: the methods' own, 0.25)")
+    for row in METHOD_FLAGS:  # the flags that change the compared methods
+        p.add_argument(row.flag, **row.argument)
     p.add_argument("--c-max-from", default=None, metavar="FILE",
                    help="reuse the per-agent-count c_max of an earlier --c-max auto (its c_max.json; chosen on "
                         "validation problems), e.g. to run the agent counts as separate commands")
@@ -56,9 +55,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="keep only the graph nodes that two-way consistency merging keeps: a node goes when the "
                         "critic's distances to and from the nodes kept so far are within TAU steps of another "
                         "kept node's (default: keep all --nodes)")
-    p.add_argument("--max-edges", type=_positive, default=None, metavar="K",
-                   help="keep at most K edges out of each graph node (its shortest; default: every edge under "
-                        "the cut-offs)")
     p.add_argument("--repair-problems", type=_non_negative, default=0, metavar="P",
                    help="before the test problems, the search methods' graphs learn which edges their agents fail "
                         "to traverse on P problems per cell drawn with --repair-seed (never the test problems), and "
@@ -68,31 +64,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--policies-at", type=_positive, nargs="+", default=None, metavar="N",
                    help="run the methods without search only at these agent counts (the paper's Table II: 1; "
                         "default: every count)")
-    p.add_argument("--budget", type=float, default=None, help="risk budget of ours_budget")
-    p.add_argument("--fallback", action="store_true",
-                   help="the constrained searches (ours, ours_budget) hand an agent's leg over to the unconstrained "
-                        "policy once the constrained one is stuck on it (e.g. it will not approach a goal beside "
-                        "furniture); the other methods are unchanged")
-    p.add_argument("--hold", choices=("order", "waits", "all"), default=None,
-                   help="how the search methods' agents keep to the plan: 'order' (the plan's order at shared "
-                        "places, however late an agent is), 'waits' or 'all' (the plan's clock; see SearchPolicy; "
-                        "default: 'order' for panorama agents, 'waits' for vector agents)")
-    p.add_argument("--repair-routes", action="store_true",
-                   help="the search methods' agents about to set off along an edge another agent failed on in the "
-                        "run plan around it first (SearchPolicy's repair_routes; default off)")
-    p.add_argument("--spread-routes", choices=SPREAD_MODES, default=None,
-                   help="the search methods' plans prefer, of routes equal in cost and conflicts, those through "
-                        "fewer nodes of other routes ('routes') or also near them ('near'); BufferPlanner's "
-                        "spread_routes; default: the planner's ('off')")
-    p.add_argument("--max-leg", type=float, default=None, metavar="STEPS",
-                   help="the search methods' plans take no leg that the constrained agent's critic reads beyond "
-                        "STEPS (BufferPlanner's max_leg; 'inf': any leg; default: with --fallback, the constrained "
-                        "searches of panorama agents take none beyond 14, where the leg would go to the fallback "
-                        "at once; otherwise any)")
-    p.add_argument("--safety", choices=("on", "off"), default=None,
-                   help="the safety layer between the controller and the env, which keeps agents from touching "
-                        "each other with the team's shared positions (agents.search.safety; default on; 'off' "
-                        "shows what the agents do without it)")
     p.add_argument("--max-cycles", type=_positive, default=300, help="step limit of a run (default 300)")
     p.add_argument("--out", default="results", help="output folder for runs.csv, table.csv, table.md, figure")
     add_resume_arguments(p, "continue the evaluation in --out: the runs already in its runs.csv are kept and not "
@@ -134,6 +105,120 @@ SMALL_AGENTS, SMALL_PROBLEMS = (1, 5), 5
 #: What the full Table I takes, as measured (README, "Measured").
 FULL_RUN_NOTE = ("the full Table I (--agents 1 5 10 20 --problems 50, the four methods of the paper) took "
                  "1126 s serially, 580 s with --ray")
+
+
+@dataclass(frozen=True)
+class MethodFlag:
+    """A flag of ``safe-mapf evaluate`` that changes the compared methods: the option it sets on the
+    methods it applies to (a config option of :data:`~agents.search.config.OPTIONS`, or a
+    :class:`~baselines.methods.Method`'s ``fallback`` or ``safety``).
+
+    Attributes:
+        flag: the command-line flag.
+        option: the option it sets.
+        applies: which methods it changes (a key of :data:`APPLIES`).
+        argument: the flag's ``add_argument`` keywords (its default is ``None``: not given).
+        value: the option's value from the flag's.
+        note: a line of ``table.md``'s header where the flag is given (``{value}``: the flag's value).
+        paper: why the flag does not apply to ``--protocol paper``.
+    """
+
+    flag: str
+    option: str
+    applies: str
+    argument: Dict[str, Any]
+    value: Callable[[Any], Any] = lambda v: v
+    note: str = ""
+    paper: str = "the published code's graph, followed open loop"
+
+    @property
+    def dest(self) -> str:
+        return self.flag[2:].replace("-", "_")
+
+    def given(self, args: argparse.Namespace) -> bool:
+        v = getattr(args, self.dest)
+        return v is not None and v is not False and v != "auto"
+
+
+#: which methods a :class:`MethodFlag` changes
+APPLIES: Dict[str, Callable[[Any], bool]] = {
+    "search": lambda m: m.search,
+    "constrained search": lambda m: m.search and math.isfinite(m.c_max),
+    "constrained driver": lambda m: m.search and m.policy == "constrained",
+    "budget": lambda m: m.budget is not None,
+    "all": lambda m: True,
+}
+
+
+def _spread_modes() -> Tuple[str, ...]:
+    from agents.search.mapf import SPREAD_MODES
+
+    return tuple(SPREAD_MODES)
+
+
+#: the flags that change the compared methods, one row each
+METHOD_FLAGS: Tuple[MethodFlag, ...] = (
+    MethodFlag("--c-max", "c_max", "constrained search", dict(
+        type=lambda t: _c_max(t), default=None,
+        help="edge cost cut-off of the constrained searches: a number, or 'auto' to choose it per agent count "
+             "on validation problems drawn with --validation-seed (never the test problems) from --c-max-grid "
+             "(default: the methods' own, 0.25)"),
+        paper="its c_max grid is the cost limit x 0.1 .. 1, chosen per cell on the test problems"),
+    MethodFlag("--budget", "budget", "budget", dict(type=float, default=None, help="risk budget of ours_budget"),
+               paper="its c_max grid is the cost limit x 0.1 .. 1, chosen per cell on the test problems"),
+    MethodFlag("--max-edges", "max_edges", "search", dict(
+        type=lambda t: _positive(t), default=None, metavar="K",
+        help="keep at most K edges out of each graph node (its shortest; default: every edge under the cut-offs)")),
+    MethodFlag("--fallback", "fallback", "constrained driver", dict(
+        action="store_true", default=None,
+        help="the constrained searches (ours, ours_budget) hand an agent's leg over to the unconstrained policy "
+             "once the constrained one is stuck on it (e.g. it will not approach a goal beside furniture); the "
+             "other methods are unchanged"),
+        value=lambda v: "unconstrained",
+        note="--fallback: the constrained searches hand a leg on which the constrained policy is stuck to the "
+             "unconstrained policy",
+        paper="its agents follow their plans open loop"),
+    MethodFlag("--hold", "hold", "search", dict(
+        choices=("order", "waits", "all"), default=None,
+        help="how the search methods' agents keep to the plan: 'order' (the plan's order at shared places, "
+             "however late an agent is), 'waits' or 'all' (the plan's clock; see SearchPolicy; default: 'order' "
+             "for panorama agents, 'waits' for vector agents)")),
+    MethodFlag("--repair-routes", "repair_routes", "search", dict(
+        action="store_true", default=None,
+        help="the search methods' agents about to set off along an edge another agent failed on in the run plan "
+             "around it first (the replanning config's repair_routes; default off)"),
+        note="--repair-routes: an agent about to set off along an edge another agent failed on plans around it "
+             "first",
+        paper="its agents follow their plans open loop"),
+    MethodFlag("--spread-routes", "spread_routes", "search", dict(
+        choices=_spread_modes(), default=None,
+        help="the search methods' plans prefer, of routes equal in cost and conflicts, those through fewer nodes "
+             "of other routes ('routes') or also near them ('near'); default: the solver's ('off')"),
+        note="--spread-routes {value}: the search methods' plans spread routes that way"),
+    MethodFlag("--max-leg", "max_leg", "search", dict(
+        type=float, default=None, metavar="STEPS",
+        help="the search methods' plans take no leg that the constrained agent's critic reads beyond STEPS (the "
+             "graph config's max_leg; 'inf': any leg; default: with --fallback, the constrained searches of "
+             "panorama agents take none beyond 14, where the leg would go to the fallback at once; otherwise any)"),
+        note="--max-leg {value:g}: the search methods' plans take no leg the constrained agent's critic reads "
+             "beyond that many steps"),
+    MethodFlag("--safety", "safety", "all", dict(
+        choices=("on", "off"), default=None,
+        help="the safety layer between the controller and the env, which keeps agents from touching each other "
+             "with the team's shared positions (agents.search.safety; default on; 'off' shows what the agents "
+             "do without it)"),
+        value=lambda v: v == "on",
+        note="--safety off: no safety layer between the controller and the env"),
+)
+
+
+def apply_method_flags(methods: List[Any], args: argparse.Namespace) -> List[Any]:
+    """``methods`` with the given flags of :data:`METHOD_FLAGS` applied to the methods each applies to."""
+    for row in METHOD_FLAGS:
+        if row.given(args):
+            change = {row.option: row.value(getattr(args, row.dest))}
+            methods = [m.with_options(**change) if APPLIES[row.applies](m) else m for m in methods]
+    return methods
 
 
 #: what an evaluation writes into --out (--overwrite removes these, and only these)
@@ -349,25 +434,7 @@ def run(args: argparse.Namespace) -> int:
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)
     methods = get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))
     marl = _marl_models(args, [m.name for m in methods])  # before any work: a missing policy fails here
-    opts = {}
-    if args.c_max is not None and args.c_max != "auto":
-        opts["c_max"] = args.c_max
-    methods = [m.with_options(**opts) if m.search and math.isfinite(m.c_max) and opts else m for m in methods]
-    if args.budget is not None:
-        methods = [m.with_options(budget=args.budget) if m.budget is not None else m for m in methods]
-    if args.fallback:
-        methods = [m.with_options(fallback="unconstrained") if m.search and m.policy == "constrained" else m
-                   for m in methods]
-    if args.hold is not None:
-        methods = [m.with_options(hold=args.hold) if m.search else m for m in methods]
-    if args.repair_routes:
-        methods = [m.with_options(repair_routes=True) if m.search else m for m in methods]
-    if args.spread_routes is not None:
-        methods = [m.with_options(spread_routes=args.spread_routes) if m.search else m for m in methods]
-    if args.max_leg is not None:
-        methods = [m.with_options(max_leg=args.max_leg) if m.search else m for m in methods]
-    if args.safety == "off":
-        methods = [m.with_options(safety=False) for m in methods]
+    methods = apply_method_flags(methods, args)
     t0 = time.perf_counter()
     from agents import load_pretrained
     from agents.search.models import default_second_opinion
@@ -381,7 +448,7 @@ def run(args: argparse.Namespace) -> int:
     kept, writer, failures, failure_writer = _open_rows(args, out)  # every check passed: the folder is ours
     assert failure_writer is not None
     setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
-                                  sparsify=args.sparsify, max_edges=args.max_edges)
+                                  sparsify=args.sparsify)
     progress = show_progress(args.no_progress or args.json)
     if chosen is None and args.c_max == "auto" and args.resume and (out / "c_max.json").exists():
         meta = _read_c_max_file(out / "c_max.json", "--resume: the folder's")  # chosen before the interruption
@@ -440,19 +507,9 @@ def run(args: argparse.Namespace) -> int:
     if chosen is not None:
         header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
                    + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
-    if args.fallback:
-        header += ("--fallback: the constrained searches hand a leg on which the constrained policy is stuck "
-                   "to the unconstrained policy\n\n")
-    if args.repair_routes:
-        header += ("--repair-routes: an agent about to set off along an edge another agent failed on plans "
-                   "around it first\n\n")
-    if args.spread_routes is not None:
-        header += f"--spread-routes {args.spread_routes}: the search methods' plans spread routes that way\n\n"
-    if args.max_leg is not None:
-        header += (f"--max-leg {args.max_leg:g}: the search methods' plans take no leg the constrained agent's "
-                   "critic reads beyond that many steps\n\n")
-    if args.safety == "off":
-        header += "--safety off: no safety layer between the controller and the env\n\n"
+    for row in METHOD_FLAGS:
+        if row.note and row.given(args) and (row.dest != "safety" or args.safety == "off"):
+            header += row.note.format(value=getattr(args, row.dest)) + "\n\n"
     if memories:
         header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
                    "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
@@ -534,20 +591,13 @@ def _run_paper(args: argparse.Namespace) -> int:
     if set(names) - set(allowed):
         raise ValueError(f"--protocol paper runs {', '.join(allowed)}; not {sorted(set(names) - set(allowed))}")
     marl = _marl_models(args, names)
-    for flag, value in (("--c-max", args.c_max), ("--budget", args.budget)):
-        if value is not None:
-            raise ValueError(f"{flag} does not apply to --protocol paper (its c_max grid is the cost limit x "
-                             "0.1 .. 1, chosen per cell on the test problems)")
-    for flag, value in (("--hold", args.hold), ("--repair-problems", args.repair_problems or None),
-                        ("--sparsify", args.sparsify), ("--max-edges", args.max_edges),
-                        ("--spread-routes", args.spread_routes), ("--max-leg", args.max_leg),
-                        ("--safety", args.safety)):
+    for row in METHOD_FLAGS:
+        if row.given(args) or getattr(args, row.dest) == "auto":
+            raise ValueError(f"{row.flag} does not apply to --protocol paper ({row.paper})")
+    for flag, value in (("--repair-problems", args.repair_problems or None), ("--sparsify", args.sparsify)):
         if value is not None:
             raise ValueError(f"{flag} does not apply to --protocol paper (the published code's graph, followed "
                              "open loop)")
-    for flag, on in (("--fallback", args.fallback), ("--repair-routes", args.repair_routes)):
-        if on:
-            raise ValueError(f"{flag} does not apply to --protocol paper (its agents follow their plans open loop)")
     methods = get_methods(names)
     out = _check_before_work(args)
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)

@@ -145,7 +145,7 @@ def test_policy_only_methods_run_only_where_asked(setup):
 
 def test_c_max_grid_comes_from_the_graph(setup):
     grid = c_max_grid(setup)
-    keep = (setup.D < setup.d_max) & (setup.C > 0)
+    keep = (setup.D < setup.planner.graph.d_max) & (setup.C > 0)
     np.fill_diagonal(keep, False)
     costs = setup.C[keep]
     assert grid == sorted(grid) and 1 <= len(grid) <= 3
@@ -285,13 +285,13 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
     real_policy = bm.SearchPolicy
 
     def spy(env, method, models, *args, **kwargs):
-        seen[method.name] = (method.fallback, method.repair_routes, method.spread_routes)
+        seen[method.name] = (method.fallback, method.option("repair_routes"), method.option("spread_routes"))
         return real(env, method, models, *args, **kwargs)
 
     planners = []
 
     def policy_spy(planner, *args, **kwargs):
-        planners.append(None if planner is None else (planner.spread_routes, planner.max_leg))
+        planners.append(None if planner is None else (planner.solver_config.spread, planner.graph.max_leg))
         return real_policy(planner, *args, **kwargs)
 
     monkeypatch.setattr(ev, "execute", spy)
@@ -300,7 +300,7 @@ def test_evaluate_command_fallback_reaches_only_the_constrained_searches(tmp_pat
                  "constrained_policy", "ours", "--nodes", "150", "--no-figure", "--json", "--fallback",
                  "--repair-routes", "--spread-routes", "routes", "--max-leg", "14", "--out", str(tmp_path)])
     assert code == 0
-    assert seen == {"sorb": (None, True, "routes"), "constrained_policy": (None, False, None),
+    assert seen == {"sorb": (None, True, "routes"), "constrained_policy": (None, None, None),
                     "ours": ("unconstrained", True, "routes")}
     # the plain policy has no planner
     assert sorted(planners, key=str) == [("routes", 14.0), ("routes", 14.0), None]
@@ -368,7 +368,7 @@ def test_evaluate_command_writes_the_failure_anatomy_and_takes_hold_and_repairs(
     real = ev.execute
 
     def spy(env, method, models, *args, **kwargs):
-        holds.append((method.name, method.hold))
+        holds.append((method.name, method.option("hold")))
         return real(env, method, models, *args, **kwargs)
 
     monkeypatch.setattr(ev, "execute", spy)
@@ -473,7 +473,7 @@ def test_execute_splits_each_agents_cost_by_what_it_did(setup):
         paid = {a for a in ACTIVITIES if ex.cost_split[:, col[a]].sum() > 0}
         if not method.search:  # no plan: nothing to wait for (it still yields, and escapes when stuck)
             assert paid <= {"drive", "escape", "yield"}
-        elif method.hold == "order":  # standing for the plan's order and for parking
+        elif method.option("hold") == "order":  # standing for the plan's order and for parking
             assert {"order", "park"} <= paid and "wait" not in paid
         else:  # vector agents keep to the plan's times
             assert "wait" in paid and not {"order", "park"} & paid

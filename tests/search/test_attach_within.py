@@ -30,7 +30,7 @@ def setting():
     planner = BufferPlanner.from_agent(model, nodes, solver="prioritized")
     assert isinstance(planner.pairwise, NodePairwise)
     every_pair = planner.pairwise.__call__  # a plain callable: no ``within``, every pair scored
-    full = BufferPlanner(planner.observations, planner.D, planner.C, every_pair, **planner.options())
+    full = BufferPlanner(planner.observations, planner.D, planner.C, every_pair, planner.graph, planner.solver_config)
     return planner, full, ends[:8], ends[8:]
 
 
@@ -42,10 +42,10 @@ def test_problem_graph_is_that_of_scoring_every_pair(setting):
     np.testing.assert_array_equal(ga.indices, gb.indices)
     np.testing.assert_allclose(ga.data, gb.data, rtol=1e-5)
     np.testing.assert_allclose(a.graph.cost.tocsr().data, b.graph.cost.tocsr().data, rtol=1e-5, atol=1e-6)
-    short = b.D < planner.d_max
-    np.testing.assert_array_equal(a.D < planner.d_max, short)
+    short = b.D < planner.graph.d_max
+    np.testing.assert_array_equal(a.D < planner.graph.d_max, short)
     np.testing.assert_allclose(a.D[short], b.D[short], rtol=1e-5)
-    assert np.all(a.D[~short] >= planner.d_max)
+    assert np.all(a.D[~short] >= planner.graph.d_max)
     n = planner.observations.shape[0]
     scored = np.zeros_like(short)
     scored[:n, :n] = True  # buffer pairs come from the planner's matrices, all exact

@@ -86,7 +86,7 @@ def test_no_clock_decides_a_plan_of_the_planner(monkeypatch):
 
     pts = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0)), axis=-1).reshape(-1, 2)
     planner = make_planner(pts, euclid_pairwise(), d_max=1.6, proximity_radius=0.9)
-    assert planner.time_limit is None
+    assert planner.solver_config.time_limit is None
     starts, goals = _crossing_problem(12)
     tight = planner.with_options(expansion_limit=300, solver="cbs", fallback_suboptimality=None)
 

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
+from agents.search.config import ControllerConfig
 from agents.search.controller import AgentPlan, WaypointController
 from agents.search.stats import ACTIVITIES
 
@@ -39,9 +40,10 @@ def make_env(starts, goals):
 def test_agent_visits_its_waypoints_around_the_block():
     env = make_env([(5.0, 27.5)], [(50.0, 27.5)])
     wps = np.array([[10.0, 10.0], [45.0, 10.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(wps, np.array([50, 27.5], np.float32) / SIZE)},
-                              reach_threshold=1.0)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": AgentPlan(wps, np.array([50, 27.5], np.float32) / SIZE)},
+        config=ControllerConfig(reach_threshold=1.0),
+    )
     trail = run(env, ctrl)["agent_0"]
     assert np.linalg.norm(trail[-1] - [50, 27.5]) <= 1.0
     for w in wps * SIZE:  # it passed close to each waypoint, so it went around the block
@@ -52,9 +54,11 @@ def test_agent_visits_its_waypoints_around_the_block():
 def test_agent_waits_for_its_planned_departure_time():
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
     wp = np.array([[10.0, 5.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[30])},
-                              reach_threshold=1.0, safety_radius=None)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps,
+        {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[30])},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None),
+    )
     trail = run(env, ctrl)["agent_0"]
     at_wp = np.linalg.norm(trail - [10, 5], axis=1) < 1.0
     left = np.flatnonzero(at_wp)[-1]
@@ -66,7 +70,7 @@ def test_lower_priority_agent_yields_in_a_head_on_encounter():
     env = make_env([(5.0, 45.0), (30.0, 45.0)], [(30.0, 45.5), (5.0, 44.5)])
     goals = np.array([[30, 45.5], [5, 44.5]], np.float32) / SIZE
     plans = {f"agent_{i}": AgentPlan(np.zeros((0, 2), np.float32), goals[i]) for i in range(2)}
-    ctrl = WaypointController(straight_policy, euclid_steps, plans, safety_radius=3.0)
+    ctrl = WaypointController(straight_policy, euclid_steps, plans, config=ControllerConfig(safety_radius=3.0))
     trails = run(env, ctrl, limit=60)
     n = min(len(trails["agent_0"]), len(trails["agent_1"]))
     d = np.linalg.norm(trails["agent_0"][:n] - trails["agent_1"][:n], axis=1)
@@ -87,9 +91,10 @@ def test_replan_is_called_when_an_agent_falls_behind():
 
     wp = np.array([[10.0, 5.0]], np.float32) / SIZE
     stuck = lambda o, g: np.zeros((len(o), 2), np.float32)  # noqa: E731  never moves
-    ctrl = WaypointController(stuck, euclid_steps,
-                              {"agent_0": AgentPlan(wp, np.array([50, 5], np.float32) / SIZE, depart_times=[0])},
-                              replan=replan, replan_lag=5, safety_radius=None)
+    ctrl = WaypointController(
+        stuck, euclid_steps, {"agent_0": AgentPlan(wp, np.array([50, 5], np.float32) / SIZE, depart_times=[0])},
+        config=ControllerConfig(replan_lag=5, safety_radius=None), replan=replan,
+    )
     ctrl.index["agent_0"] = 1  # pretend it left the waypoint at time 0 but makes no progress
     env.reset(options=env._pinned)
     obs = {"agent_0": env.normalize(np.array([5.0, 5.0]))}
@@ -109,14 +114,17 @@ def test_the_start_waypoint_counts_as_reached_whatever_the_critic_says():
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
     start = np.array([[5.0, 5.0]], np.float32) / SIZE
     goal = np.array([20, 5], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, offset_steps,
-                              {"agent_0": AgentPlan(start, goal, depart_times=[0], starts_at_first=True)},
-                              reach_threshold=2.0, safety_radius=None)
+    ctrl = WaypointController(
+        straight_policy, offset_steps, {"agent_0": AgentPlan(start, goal, depart_times=[0], starts_at_first=True)},
+        config=ControllerConfig(reach_threshold=2.0, safety_radius=None),
+    )
     trail = run(env, ctrl, limit=40)["agent_0"]
     assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0
     # without the flag the agent heads for its own start and never gets closer than 2.5 "steps"
-    ctrl = WaypointController(straight_policy, offset_steps, {"agent_0": AgentPlan(start, goal, depart_times=[0])},
-                              reach_threshold=2.0, safety_radius=None, stuck_window=None)
+    ctrl = WaypointController(
+        straight_policy, offset_steps, {"agent_0": AgentPlan(start, goal, depart_times=[0])},
+        config=ControllerConfig(reach_threshold=2.0, safety_radius=None, stuck_window=None),
+    )
     trail = run(env, ctrl, limit=40)["agent_0"]
     assert np.linalg.norm(trail[-1] - [20, 5]) > 10.0
 
@@ -124,10 +132,12 @@ def test_the_start_waypoint_counts_as_reached_whatever_the_critic_says():
 def test_the_start_waypoint_still_holds_until_its_departure_time():
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
     start = np.array([[5.0, 5.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, offset_steps,
-                              {"agent_0": AgentPlan(start, np.array([20, 5], np.float32) / SIZE, depart_times=[10],
+    ctrl = WaypointController(
+        straight_policy, offset_steps,
+        {"agent_0": AgentPlan(start, np.array([20, 5], np.float32) / SIZE, depart_times=[10],
                                                     starts_at_first=True)},
-                              reach_threshold=2.0, safety_radius=None)
+        config=ControllerConfig(reach_threshold=2.0, safety_radius=None),
+    )
     trail = run(env, ctrl, limit=40)["agent_0"]
     np.testing.assert_allclose(trail[:11], np.repeat([[5.0, 5.0]], 11, axis=0), atol=1e-6)
     assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0 and ctrl.stats.escapes == 0
@@ -147,16 +157,20 @@ def test_a_stuck_agent_escapes_with_random_actions_and_gives_up_the_waypoint():
     trails = []
     for _ in range(2):
         env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
-        ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                                  reach_threshold=0.1, safety_radius=None, seed=3)
+        ctrl = WaypointController(
+            wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+            config=ControllerConfig(reach_threshold=0.1, safety_radius=None), seed=3,
+        )
         trails.append(run(env, ctrl, limit=40)["agent_0"])
         assert ctrl.stats.escapes >= 2 and ctrl.stats.skips == 1
         assert ctrl.index["agent_0"] == 1  # now heading for the goal
     np.testing.assert_array_equal(trails[0], trails[1])
     # off: pressed against the wall to the end
     env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
-    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                              reach_threshold=0.1, safety_radius=None, stuck_window=None)
+    ctrl = WaypointController(
+        wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+        config=ControllerConfig(reach_threshold=0.1, safety_radius=None, stuck_window=None),
+    )
     trail = run(env, ctrl, limit=40)["agent_0"]
     assert ctrl.stats.escapes == 0 and np.ptp(trail[10:], axis=0).max() < 1e-3
 
@@ -164,18 +178,20 @@ def test_a_stuck_agent_escapes_with_random_actions_and_gives_up_the_waypoint():
 def test_waiting_on_purpose_is_not_being_stuck():
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
     wp = np.array([[5.0, 5.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[25])},
-                              reach_threshold=1.0, safety_radius=None)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps,
+        {"agent_0": AgentPlan(wp, np.array([20, 5], np.float32) / SIZE, depart_times=[25])},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None),
+    )
     run(env, ctrl, limit=60)
     assert ctrl.stats.waits >= 20 and ctrl.stats.escapes == 0
 
 
 def test_unstick_arguments_are_checked():
     with pytest.raises(ValueError, match="stuck_window"):
-        WaypointController(straight_policy, euclid_steps, {}, stuck_window=0)
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(stuck_window=0))
     with pytest.raises(ValueError, match="escape_steps"):
-        WaypointController(straight_policy, euclid_steps, {}, escape_steps=0)
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(escape_steps=0))
 
 
 def test_a_stuck_agent_asks_for_a_new_plan_when_it_can():
@@ -188,8 +204,10 @@ def test_a_stuck_agent_asks_for_a_new_plan_when_it_can():
         return AgentPlan(np.zeros((0, 2), np.float32), plan.goal)
 
     env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
-    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                              reach_threshold=0.1, safety_radius=None, replan=replan)
+    ctrl = WaypointController(
+        wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+        config=ControllerConfig(reach_threshold=0.1, safety_radius=None), replan=replan,
+    )
     run(env, ctrl, limit=30)
     assert ctrl.stats.replans == 1 and ctrl.stats.skips == 0
     agent, index, obs = seen[0]
@@ -205,8 +223,10 @@ def test_a_waypoint_whose_own_distance_is_above_the_threshold_is_still_reached()
     goal = np.array([12, 25], np.float32) / SIZE
     for margin, arrives in ((0.5, True), (None, False)):
         env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
-        ctrl = WaypointController(straight_policy, offset_steps, {"agent_0": AgentPlan(wp, goal)},
-                                  reach_threshold=2.0, self_margin=margin, safety_radius=None, stuck_window=None)
+        ctrl = WaypointController(
+            straight_policy, offset_steps, {"agent_0": AgentPlan(wp, goal)},
+            config=ControllerConfig(reach_threshold=2.0, self_margin=margin, safety_radius=None, stuck_window=None),
+        )
         trail = run(env, ctrl, limit=60)["agent_0"]
         assert (np.linalg.norm(trail[-1] - [12, 25]) <= 1.0) == arrives
         assert ctrl.reach_threshold_of("agent_0") == (np.inf if arrives else 2.0)
@@ -224,9 +244,11 @@ def test_an_agent_hovering_beside_its_waypoint_moves_on_after_the_settle_patienc
     results = {}
     for patience in (5, None):
         env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
-        ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                                  reach_threshold=1.0, settle_patience=patience, settle_slack=1.5,
-                                  safety_radius=None, stuck_window=None)
+        ctrl = WaypointController(
+            short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+            config=ControllerConfig(reach_threshold=1.0, settle_patience=patience, settle_slack=1.5,
+                                    safety_radius=None, stuck_window=None),
+        )
         trail = run(env, ctrl, limit=80)["agent_0"]
         results[patience] = (ctrl.index["agent_0"], ctrl.stats.settled, trail)
     index, settled, trail = results[5]
@@ -236,9 +258,11 @@ def test_an_agent_hovering_beside_its_waypoint_moves_on_after_the_settle_patienc
     assert index == 0 and settled == 0 and trail[-1][1] < 6.0  # hovering 2 units short to the end
     # too far from the waypoint to count as beside it: the rule does not fire
     env = make_env([(5.0, 5.0)], [(12.0, 25.0)])
-    ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                              reach_threshold=0.2, settle_patience=5, settle_slack=1.0,
-                              safety_radius=None, stuck_window=None)
+    ctrl = WaypointController(
+        short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+        config=ControllerConfig(reach_threshold=0.2, settle_patience=5, settle_slack=1.0, safety_radius=None,
+                                stuck_window=None),
+    )
     run(env, ctrl, limit=40)
     assert ctrl.index["agent_0"] == 0 and ctrl.stats.settled == 0
 
@@ -249,9 +273,10 @@ def on_course_run(slack, limit=120):
     Returns the controller, the trail and where the agent stood when it set off for the goal."""
     env = make_env([(14.0, 27.0)], [(45.0, 12.0)])
     wp = np.array([[17.0, 12.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(wp, np.array([45, 12], np.float32) / SIZE)},
-                              reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=slack)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": AgentPlan(wp, np.array([45, 12], np.float32) / SIZE)},
+        config=ControllerConfig(reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=slack),
+    )
     obs, infos = env.reset(options=env._pinned)
     trail, turned = [infos["agent_0"]["position"]], None
     while env.agents and ctrl.t < limit:
@@ -287,9 +312,10 @@ def test_a_new_plan_starts_the_on_course_test_afresh():
     index, does not count as having stopped closing in on the new one."""
     env = make_env([(14.0, 27.0)], [(45.0, 12.0)])
     goal = np.array([45, 12], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(np.array([[14.0, 20.0]], np.float32) / SIZE, goal)},
-                              reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=0.0)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": AgentPlan(np.array([[14.0, 20.0]], np.float32) / SIZE, goal)},
+        config=ControllerConfig(reach_threshold=16.0, safety_radius=None, stuck_window=None, advance_slack=0.0),
+    )
     obs, infos = env.reset(options=env._pinned)
     trail, replanned, turned = [infos["agent_0"]["position"]], False, None
     while env.agents and ctrl.t < 120:
@@ -313,9 +339,11 @@ def test_the_on_course_test_holds_an_agent_only_while_it_closes_in_on_its_waypoi
     wp = np.array([[20.0, 5.0]], np.float32) / SIZE
     goal = np.array([40, 5], np.float32) / SIZE
     env = make_env([(5.0, 5.0)], [(40.0, 5.0)])
-    ctrl = WaypointController(short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                              reach_threshold=3.0, settle_patience=10, advance_slack=0.0,
-                              safety_radius=None, stuck_window=4)
+    ctrl = WaypointController(
+        short_stopper, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+        config=ControllerConfig(reach_threshold=3.0, settle_patience=10, advance_slack=0.0, safety_radius=None,
+                                stuck_window=4),
+    )
     obs, infos = env.reset(options=env._pinned)
     held = moved_on = None
     while env.agents and ctrl.t < 80:
@@ -339,15 +367,19 @@ def refuser(obs, goal):
 def test_a_stuck_leg_is_handed_to_the_fallback_policy():
     goal = np.array([20, 5], np.float32) / SIZE
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
-    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
-                              reach_threshold=1.0, safety_radius=None, fallback_policy=straight_policy, seed=1)
+    ctrl = WaypointController(
+        refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None), fallback_policy=straight_policy, seed=1,
+    )
     trail = run(env, ctrl, limit=80)["agent_0"]
     assert np.linalg.norm(trail[-1] - [20, 5]) <= 1.0
     assert ctrl.stats.fallbacks == 1 and ctrl.stats.fallback_steps > 0
     # without it the refusing agent never gets there
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
-    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
-                              reach_threshold=1.0, safety_radius=None, seed=1)
+    ctrl = WaypointController(
+        refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None), seed=1,
+    )
     trail = run(env, ctrl, limit=80)["agent_0"]
     assert np.linalg.norm(trail[-1] - [20, 5]) > 5.0 and ctrl.stats.fallbacks == 0
 
@@ -357,8 +389,10 @@ def test_the_controller_records_what_each_agent_does_on_each_step():
     then the fallback drives its leg; holds are named after their reason."""
     goal = np.array([20, 5], np.float32) / SIZE
     env = make_env([(5.0, 5.0)], [(20.0, 5.0)])
-    ctrl = WaypointController(refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
-                              reach_threshold=1.0, safety_radius=None, fallback_policy=straight_policy, seed=1)
+    ctrl = WaypointController(
+        refuser, euclid_steps, {"agent_0": AgentPlan(goal[None][:0], goal)},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None), fallback_policy=straight_policy, seed=1,
+    )
     obs, _ = env.reset(options=env._pinned)
     seen = []
     while env.agents and ctrl.t < 80:
@@ -398,8 +432,10 @@ def test_the_fallback_drives_only_the_stuck_leg():
     wp = np.array([[12.0, 5.0]], np.float32) / SIZE
     goal = np.array([25, 5], np.float32) / SIZE
     env = make_env([(5.0, 5.0)], [(25.0, 5.0)])
-    ctrl = WaypointController(main, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
-                              reach_threshold=1.0, safety_radius=None, fallback_policy=fb, seed=0)
+    ctrl = WaypointController(
+        main, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None), fallback_policy=fb, seed=0,
+    )
     trail = run(env, ctrl, limit=80)["agent_0"]
     assert np.linalg.norm(trail[-1] - [25, 5]) <= 1.0
     assert ctrl.stats.fallbacks == 1
@@ -416,8 +452,11 @@ def corner_run(retreat, fallback=straight_policy, limit=150, via=None):
     env = make_env([(14.0, 27.0)], [goal])
     wps = [(14.0, 44.0)] + ([] if via is None else [via])
     plan = AgentPlan(np.array(wps, np.float32) / SIZE, np.array(goal, np.float32) / SIZE)
-    ctrl = WaypointController(straight_policy, euclid_steps, {"agent_0": plan}, reach_threshold=18.0,
-                              safety_radius=None, fallback_policy=fallback, skip_after=1, seed=0, retreat=retreat)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": plan},
+        config=ControllerConfig(reach_threshold=18.0, safety_radius=None, skip_after=1, retreat=retreat),
+        fallback_policy=fallback, seed=0,
+    )
     return ctrl, run(env, ctrl, limit=limit)["agent_0"]
 
 
@@ -460,9 +499,11 @@ def test_an_agent_stuck_on_its_way_back_asks_for_a_new_plan_which_ends_the_going
 
     env = make_env([(14.0, 27.0)], [(45.0, 27.0)])
     plan = AgentPlan(np.array([[5.0, 27.0]], np.float32) / SIZE, np.array([45, 27], np.float32) / SIZE)
-    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": plan}, reach_threshold=10.0,
-                              safety_radius=None, fallback_policy=wall_pusher, skip_after=1, seed=0,
-                              retreat="goal", replan=replan)
+    ctrl = WaypointController(
+        wall_pusher, euclid_steps, {"agent_0": plan},
+        config=ControllerConfig(reach_threshold=10.0, safety_radius=None, skip_after=1, retreat="goal"),
+        fallback_policy=wall_pusher, seed=0, replan=replan,
+    )
     run(env, ctrl, limit=80)
     assert asked and asked[0] == (True, 1)  # stuck while going back: a new plan
     assert ctrl.stats.retreats == 1 and not ctrl._back
@@ -472,9 +513,10 @@ def test_settling_needs_the_agent_near_now_not_only_once():
     """An agent that read near once and is now pressed against a wall with its waypoint behind it
     (reading far) has not settled beside the waypoint."""
     wp = np.array([[12.0, 5.0]], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps,
-                              {"agent_0": AgentPlan(wp, np.array([12, 25], np.float32) / SIZE)},
-                              reach_threshold=3.0, settle_patience=5, settle_slack=1.5)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": AgentPlan(wp, np.array([12, 25], np.float32) / SIZE)},
+        config=ControllerConfig(reach_threshold=3.0, settle_patience=5, settle_slack=1.5),
+    )
     assert not ctrl._settled("agent_0", 0, 3.5)  # closest approach so far, at t = 0
     ctrl.t = 10
     assert not ctrl._settled("agent_0", 0, 15.0)  # far now: not settled
@@ -496,9 +538,11 @@ def test_with_skip_after_one_a_stuck_leg_goes_to_the_fallback_at_once_and_then_t
             return AgentPlan(np.zeros((0, 2), np.float32), plan.goal)
 
         env = make_env([(5.0, 5.0)], [(40.0, 40.0)])
-        ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)}, reach_threshold=0.1,
-                                  safety_radius=None, replan=replan, fallback_policy=wall_pusher,
-                                  skip_after=skip_after, seed=0)
+        ctrl = WaypointController(
+            wall_pusher, euclid_steps, {"agent_0": AgentPlan(wp, goal)},
+            config=ControllerConfig(reach_threshold=0.1, safety_radius=None, skip_after=skip_after), replan=replan,
+            fallback_policy=wall_pusher, seed=0,
+        )
         run(env, ctrl, limit=60)
         return asked[0]  # (step, fallbacks, escapes) when the first new plan was asked for
 
@@ -514,9 +558,12 @@ def push_past_a_parked_agent(escape, seed, sidestep_after=None):
     env = safe_mapf_envs.parallel_env("SafeCentralObstacle-v0", n_agents=2)
     obs, infos = env.reset(options={"starts": [(5.0, 5.0), (15.0, 5.0)], "goals": [(30.0, 5.0), (15.0, 5.0)]})
     goal = np.array([30, 5], np.float32) / SIZE
-    ctrl = WaypointController(straight_policy, euclid_steps, {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), goal)},
-                              reach_threshold=1.0, safety_radius=None, escape=escape, seed=seed, skip_after=100,
-                              sidestep_after=sidestep_after)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), goal)},
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None, escape=escape, skip_after=100,
+                                sidestep_after=sidestep_after),
+        seed=seed,
+    )
     trail = [infos["agent_0"]["position"]]
     while "agent_0" in env.agents and ctrl.t < 200:
         actions = ctrl.act({"agent_0": obs["agent_0"]["observation"]})
@@ -552,12 +599,12 @@ def test_sidestep_after_turns_the_escapes_of_an_agent_stuck_again_and_again_into
         assert steps is not None and escapes <= 2  # one random escape, then a sidestep gets it past
     assert max(r[1] for r in random_runs) >= 3  # random escapes alone take longer somewhere
     with pytest.raises(ValueError, match="sidestep_after must be"):
-        WaypointController(straight_policy, euclid_steps, {}, sidestep_after=-1)
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(sidestep_after=-1))
 
 
 def test_the_escape_kind_is_checked():
     with pytest.raises(ValueError, match="escape must be"):
-        WaypointController(straight_policy, euclid_steps, {}, escape="spin")
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(escape="spin"))
 
 
 def test_sidesteps_alternate_sides():
@@ -566,8 +613,10 @@ def test_sidesteps_alternate_sides():
     wp = np.array([[20.0, 0.2]], np.float32) / SIZE  # in the wall: never reached
     env = make_env([(20.0, 5.0)], [(40.0, 40.0)])
     plan = AgentPlan(wp, np.array([40, 40], np.float32) / SIZE)
-    ctrl = WaypointController(wall_pusher, euclid_steps, {"agent_0": plan}, reach_threshold=0.1, safety_radius=None,
-                              escape="sidestep", skip_after=100)
+    ctrl = WaypointController(
+        wall_pusher, euclid_steps, {"agent_0": plan},
+        config=ControllerConfig(reach_threshold=0.1, safety_radius=None, escape="sidestep", skip_after=100),
+    )
     trail = run(env, ctrl, limit=40)["agent_0"]
     moved = np.diff(trail, axis=0)
     along = moved[np.abs(moved[:, 0]) > 0.9, 0]  # the escape steps, along the wall
@@ -586,8 +635,11 @@ def clear_goal_run(goal_clearance, zigzags=8, depart=None, after=None, order_pat
     plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), g0),
              "agent_1": AgentPlan(wps, g1, depart_times=None if depart is None else [depart] + [0] * zigzags,
                                   starts_at_first=True, after=after)}
-    ctrl = WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=None,
-                              stuck_window=None, goal_clearance=goal_clearance, order_patience=order_patience)
+    ctrl = WaypointController(
+        straight_policy, euclid_steps, plans,
+        config=ControllerConfig(reach_threshold=1.0, safety_radius=None, stuck_window=None,
+                                goal_clearance=goal_clearance, order_patience=order_patience),
+    )
     obs, infos = env.reset(options=env._pinned)
     arrived, gap, held = {}, None, set()
     while env.agents and ctrl.t < 300:
@@ -623,8 +675,10 @@ def test_an_agent_standing_nearer_the_others_goal_moves_on_instead_of_waiting():
         g0 = np.array([20, 5], np.float32) / SIZE
         plans = {"agent_0": AgentPlan(np.zeros((0, 2), np.float32), g0),
                  "agent_1": AgentPlan(np.zeros((0, 2), np.float32), np.array(goal1, np.float32) / SIZE)}
-        ctrl = WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=None,
-                                  stuck_window=None, goal_clearance=3.0)
+        ctrl = WaypointController(
+            straight_policy, euclid_steps, plans,
+            config=ControllerConfig(reach_threshold=1.0, safety_radius=None, stuck_window=None, goal_clearance=3.0),
+        )
         ctrl.act({"agent_0": np.array([16, 5], np.float32) / SIZE, "agent_1": np.array([21, 5], np.float32) / SIZE})
         return ctrl.stats.holding["agent_0"]
 
@@ -651,8 +705,8 @@ def two_on_last_legs(goal0, goal1, **kw):
     """A controller of two agents with no waypoints left, heading for goals at x = ``goal0`` / ``goal1``, y = 5."""
     plans = {a: AgentPlan(np.zeros((0, 2), np.float32), np.array([g, 5], np.float32) / SIZE)
              for a, g in (("agent_0", goal0), ("agent_1", goal1))}
-    return WaypointController(straight_policy, euclid_steps, plans, reach_threshold=1.0, safety_radius=3.0,
-                              stuck_window=None, **kw)
+    return WaypointController(straight_policy, euclid_steps, plans,
+                              ControllerConfig(reach_threshold=1.0, safety_radius=3.0, stuck_window=None, **kw))
 
 
 def step(ctrl, p0, p1):
@@ -679,7 +733,7 @@ def test_with_goal_clearance_the_agent_by_the_others_goal_goes_first_and_keeps_i
 
 def test_goal_clearance_is_checked():
     with pytest.raises(ValueError, match="goal_clearance must be"):
-        WaypointController(straight_policy, euclid_steps, {}, goal_clearance=0.0)
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(goal_clearance=0.0))
 
 
 def test_with_push_margin_an_agent_pushed_while_it_yields_goes_first_and_keeps_its_priority():
@@ -700,7 +754,7 @@ def test_with_push_margin_an_agent_pushed_while_it_yields_goes_first_and_keeps_i
 
 def test_push_margin_is_checked():
     with pytest.raises(ValueError, match="push_margin must be"):
-        WaypointController(straight_policy, euclid_steps, {}, push_margin=-1.0)
+        WaypointController(straight_policy, euclid_steps, {}, config=ControllerConfig(push_margin=-1.0))
 
 
 def test_a_leg_the_drivers_critic_puts_out_of_reach_is_handed_to_the_fallback_at_its_start():
@@ -722,8 +776,11 @@ def test_a_leg_the_drivers_critic_puts_out_of_reach_is_handed_to_the_fallback_at
     arrivals = {}
     for beyond in (None, 20.0):
         env = make_env([(5.0, 5.0)], [(25.0, 5.0)])
-        ctrl = WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, reach_threshold=1.0,
-                                  safety_radius=None, fallback_policy=straight_policy, seed=0, fallback_beyond=beyond)
+        ctrl = WaypointController(
+            main, critic, {"agent_0": AgentPlan(wp, goal)},
+            config=ControllerConfig(reach_threshold=1.0, safety_radius=None, fallback_beyond=beyond),
+            fallback_policy=straight_policy, seed=0,
+        )
         trail = run(env, ctrl, limit=120)["agent_0"]
         assert np.linalg.norm(trail[-1] - [25, 5]) <= 1.0
         arrivals[beyond] = len(trail)
@@ -734,4 +791,4 @@ def test_a_leg_the_drivers_critic_puts_out_of_reach_is_handed_to_the_fallback_at
             assert 5 <= ctrl.stats.fallback_steps <= 9
     assert arrivals[20.0] < arrivals[None]
     with pytest.raises(ValueError, match="fallback_beyond"):
-        WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, fallback_beyond=0.0)
+        WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, config=ControllerConfig(fallback_beyond=0.0))

@@ -5,6 +5,7 @@ import pytest
 
 import safe_mapf_envs
 from agents.search import SearchPolicy
+from agents.search.config import ControllerConfig
 from agents.search.controller import AgentPlan, WaypointController
 from agents.search.dependencies import plan_dependencies, proximity_relation
 from agents.search.ordering import hold_cycle
@@ -76,8 +77,10 @@ def test_two_agents_swapping_places_do_not_wait_for_each_other():
     plans = {f"agent_{a}": AgentPlan(wp[a], np.array([100.0 + a, 0.0]), starts_at_first=True,
                                      after={q: [(f"agent_{i}", r) for i, r in v] for q, v in deps[a].items()})
              for a in range(2)}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=40)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=40),
+    )
     for _ in range(6):  # every agent stands on the target it heads for at each step
         c.act({a: c.current_goal(a) for a in plans})
     assert c.index == {"agent_0": 4, "agent_1": 4} and c.stats.waits <= 2
@@ -108,9 +111,11 @@ def test_an_agent_that_holds_its_parking_for_another_lets_that_one_go_first():
     wb = np.array([[0.0, 5.0], [2.0, 5.0]])
     plans = {"a": AgentPlan(wa, np.array([6.0, 0.0]), starts_at_first=True, after={2: [("b", 2)]}),
              "b": AgentPlan(wb, np.array([4.0, 1.0]), starts_at_first=True)}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=40,
-                           goal_order=lambda agent: [("a", 2)] if agent == "b" else [])
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=40),
+        goal_order=lambda agent: [("a", 2)] if agent == "b" else [],
+    )
     arrived = run_teleported(c, plans, steps=20)
     assert set(arrived) == {"a", "b"} and max(arrived.values()) < 10 and c.stats.waits < 10
     assert plans["a"].after is not None and c._after["a"] == {2: []}  # a no longer waits for b
@@ -129,8 +134,11 @@ def test_holds_that_close_a_cycle_of_three_agents_are_broken_at_once(c_parks_aft
              "c": AgentPlan(line[:2] + [0.0, 9.0], np.array([4.0, 9.0]), starts_at_first=True,
                             after=None if c_parks_after_a else {2: [("a", 2)]})}
     order = (lambda agent: [("a", 2)] if agent == "c" else []) if c_parks_after_a else None
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=40, goal_order=order)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=40),
+        goal_order=order,
+    )
     arrived = run_teleported(c, plans, steps=60)
     assert set(arrived) == {"a", "b", "c"} and max(arrived.values()) < 10 and c.stats.cycles == 1
     first = "a"  # the one c parks after; in the plan-order cycle the first by name, a too
@@ -149,9 +157,11 @@ def test_an_agent_holding_its_parking_keeps_holding_in_a_cycle_whatever_the_name
     wb = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
     plans = {"a": AgentPlan(wa, np.array([6.0, 1.0]), starts_at_first=True),
              "b": AgentPlan(wb, np.array([6.0, 0.0]), starts_at_first=True, after={1: [("a", 2)]})}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=40,
-                           goal_order=lambda agent: [("b", 1)] if agent == "a" else [])
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=40),
+        goal_order=lambda agent: [("b", 1)] if agent == "a" else [],
+    )
     for _ in range(20):  # every agent stands on the target it heads for at each step
         c.act({x: c.current_goal(x) for x in plans})
         if c.index["a"] == 3:  # a set off for its goal: b has passed its target 1
@@ -165,8 +175,10 @@ def test_a_chain_of_waits_that_does_not_close_a_cycle_is_kept():
     plans = {"a": AgentPlan(line, np.array([6.0, 0.0]), starts_at_first=True, after={2: [("b", 2)]}),
              "b": AgentPlan(line + [0.0, 5.0], np.array([6.0, 5.0]), starts_at_first=True, after={2: [("c", 2)]}),
              "c": AgentPlan(line + [0.0, 9.0], np.array([6.0, 9.0]), starts_at_first=True)}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=40)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=40),
+    )
     arrived = run_teleported(c, plans, steps=60)
     assert arrived["c"] < arrived["b"] < arrived["a"] and c.stats.cycles == 0
 
@@ -240,8 +252,10 @@ def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_
     plans = {"a": AgentPlan(wp, np.array([12.0, 0.0]), starts_at_first=True),
              "b": AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True,
                             after={1: [("a", 2)]})}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=5)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=5),
+    )
     obs = {"a": wp[0], "b": wp[0] + [0.0, 1.0]}
     c.act(obs)
     assert c.index["b"] == 0 and c.stats.holding["b"] == "wait:a"  # a has not reached its waypoint 2
@@ -252,8 +266,10 @@ def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_
     assert c.index["b"] == 1 and c.stats.holding["b"] is None
     # patience: b waits on a, which stays where it is; after order_patience steps b goes anyway
     plans["b"] = AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True, after={1: [("a", 2)]})
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=5)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=5),
+    )
     waited = 0
     while c.index["b"] == 0 and waited < 20:
         c.act({"a": wp[0] + [0.0, 3.0], "b": obs["b"]})
@@ -261,10 +277,16 @@ def test_the_controller_waits_for_the_agent_ahead_and_gives_up_on_one_that_does_
     assert 5 <= waited <= 7 and c.index["b"] == 1
     # an agent that has arrived (no longer live) releases the agents waiting on it, and so does a new plan
     plans["b"] = AgentPlan(wp[:2] + [0.0, 1.0], np.array([20.0, 1.0]), starts_at_first=True, after={1: [("a", 2)]})
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None),
+    )
     c.act({"b": obs["b"]})
     assert c.index["b"] == 1
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None),
+    )
     c.set_plans({"a": AgentPlan(wp[:1], np.array([0.0, 5.0]))})
     c.act({"a": wp[0], "b": obs["b"]})
     assert c.index["b"] == 1
@@ -279,8 +301,10 @@ def test_an_agent_does_not_yield_to_one_that_waits_for_it():
     plans = {"a": AgentPlan(np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([9.0, 0.0]), starts_at_first=True,
                             after={1: [("b", 1)]}),
              "b": AgentPlan(np.array([[0.0, 1.0], [5.0, 1.0]]), np.array([9.0, 1.0]), starts_at_first=True)}
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=3.0,
-                           stuck_window=None, order_patience=50)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=3.0, stuck_window=None, order_patience=50),
+    )
     for _ in range(3):
         act = c.act({"a": np.array([0.0, 0.0]), "b": np.array([0.0, 1.0])})
     assert c.stats.holding == {"a": "wait:b", "b": None} and c.stats.yields == 0
@@ -288,9 +312,12 @@ def test_an_agent_does_not_yield_to_one_that_waits_for_it():
     c.act({"a": np.array([0.0, 0.0]), "b": np.array([5.0, 1.0])})  # b reached its waypoint: a may go
     assert c.index["a"] == 1 and c.stats.holding["a"] is None
     # two agents that both move still yield: the lower priority stands still
-    c = WaypointController(still, line_distance, {"a": AgentPlan(np.zeros((0, 2)), np.array([9.0, 0.0])),
+    c = WaypointController(
+        still, line_distance,
+        {"a": AgentPlan(np.zeros((0, 2)), np.array([9.0, 0.0])),
                                                   "b": AgentPlan(np.zeros((0, 2)), np.array([9.0, 1.0]))},
-                           reach_threshold=0.5, safety_radius=3.0, stuck_window=None)
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=3.0, stuck_window=None),
+    )
     c.act({"a": np.array([0.0, 0.0]), "b": np.array([0.0, 1.0])})
     assert c.stats.holding == {"a": None, "b": "yield:a"} and c.stats.activity == {"a": "drive", "b": "yield"}
 
@@ -303,20 +330,25 @@ def test_an_agent_that_hovers_away_from_its_target_counts_as_stuck_and_replans()
         asked.append(agent)
         return AgentPlan(np.array([ob]), plan.goal, starts_at_first=True)
 
-    c = WaypointController(still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
-                           reach_threshold=0.5, safety_radius=None, stuck_window=4, stuck_tolerance=0.01,
-                           replan=replan, progress_patience=10, escape_steps=1, skip_after=2)
+    c = WaypointController(
+        still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=4, stuck_tolerance=0.01,
+                                progress_patience=10, escape_steps=1, skip_after=2),
+        replan=replan,
+    )
     for t in range(60):  # it moves (never stuck by the window rule) but comes no closer to waypoint 1
         c.act({"a": np.array([2.0, 3.0 + 0.3 * (7 * t % 5)])})
     assert c.stats.stalls >= 2 and len(asked) >= 1 and c.stats.escapes == c.stats.stalls
-    off = WaypointController(still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
-                             reach_threshold=0.5, safety_radius=None, replan=replan)
+    off = WaypointController(
+        still, line_distance, {"a": AgentPlan(wp, np.array([9.0, 0.0]), starts_at_first=True)},
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None), replan=replan,
+    )
     n_asked = len(asked)
     for t in range(60):
         off.act({"a": np.array([2.0, 3.0 + 0.3 * (7 * t % 5)])})
     assert off.stats.stalls == 0 and off.stats.escapes == 0 and len(asked) == n_asked  # the rule is off by default
     with pytest.raises(ValueError, match="progress_patience"):
-        WaypointController(still, line_distance, {}, progress_patience=0)
+        WaypointController(still, line_distance, {}, config=ControllerConfig(progress_patience=0))
 
 
 @pytest.fixture(scope="module")
@@ -364,14 +396,14 @@ def test_panorama_agents_keep_the_plans_order_and_vector_agents_its_clock(stand_
 
     from gymnasium import spaces
 
-    from agents.search.models import default_hold
+    from agents.search.config import preset_for
 
     image = spaces.Dict({"observation": spaces.Box(0, 255, (4, 32, 32, 4), np.uint8)})
-    assert default_hold(SimpleNamespace(observation_space=image)) == "order"
-    assert default_hold(stand_in_models["constrained"]) == "waits"
+    assert preset_for(SimpleNamespace(observation_space=image)).controller.hold == "order"
+    assert preset_for(stand_in_models["constrained"]).controller.hold == "waits"
     agent = stand_in_models["constrained"]
-    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0).hold == "waits"
-    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="order").hold == "order"
+    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0).config.controller.hold == "waits"
+    assert SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="order").config.controller.hold == "order"
     with pytest.raises(ValueError, match="hold must be"):
         SearchPolicy.from_models(agent, agent, nodes, d_max=12.0, hold="never")
 
@@ -389,8 +421,11 @@ def test_an_agent_parks_only_after_the_agents_whose_routes_pass_its_goal():
         asked.append(agent)
         return [("b", 2)] if agent == "a" else []
 
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=5, goal_order=goal_order)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=5),
+        goal_order=goal_order,
+    )
     a0, b = np.array([0.0, 0.0]), [np.array([3.0, 5.0]), np.array([3.0, 1.0]), np.array([3.0, -5.0])]
     c.act({"a": a0, "b": b[0]})
     assert c.index["a"] == 0 and c.stats.holding["a"] == "wait:b" and "a" in asked
@@ -400,15 +435,21 @@ def test_an_agent_parks_only_after_the_agents_whose_routes_pass_its_goal():
     c.act({"a": a0, "b": b[2]})  # b has passed
     assert c.index["a"] == 1 and c.stats.holding["a"] is None
     # a b that stays where it is: a gives up on it after the patience, for good
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None,
-                           stuck_window=None, order_patience=5, goal_order=goal_order)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None, order_patience=5),
+        goal_order=goal_order,
+    )
     waited = 0
     while c.index["a"] == 0 and waited < 20:
         c.act({"a": a0, "b": b[0] + [0.0, 3.0]})
         waited += 1
     assert 5 <= waited <= 7 and c.index["a"] == 1 and c._gave_up["a"] == {"b"}
     # without goal_order (the default) a parks at once
-    c = WaypointController(still, line_distance, plans, reach_threshold=0.5, safety_radius=None, stuck_window=None)
+    c = WaypointController(
+        still, line_distance, plans,
+        config=ControllerConfig(reach_threshold=0.5, safety_radius=None, stuck_window=None),
+    )
     c.act({"a": a0, "b": b[0]})
     assert c.index["a"] == 1
 
@@ -428,7 +469,7 @@ def test_the_agents_that_must_pass_a_goal_are_read_off_their_remaining_routes(st
     D[1, 5] = D[5, 1] = D[5, 2] = D[2, 5] = 2.7  # a's goal 5 lies on its way: 5.4 <= 4 + radius
     D[3, 5] = D[5, 3] = 1.0  # node 3 is near a's goal
     problem = SimpleNamespace(D=D, n_buffer=5)
-    policy.planner.proximity_radius = 1.5
+    policy.planner = policy.planner.with_options(proximity_radius=1.5)
     policy.agents = ["a", "b", "c", "d"]
     policy.routes = {"a": [0], "b": [0, 1, 2], "c": [0, 3], "d": [0, 4]}
     policy._route_graph = {a: (problem, g, 0) for a, g in zip(policy.agents, [5, 6, 6, 6])}

@@ -113,14 +113,29 @@ def test_a_search_policy_file_records_its_env_and_is_checked_whole(nodes, models
     short = rewrite_npz(path, tmp_path / "short.npz", C=np.zeros((29, 29)))
     with pytest.raises(ValueError, match=r"short.npz: C must be a \(30, 30\) matrix"):
         SearchPolicy.load(short, critic)
-    odd = rewrite_npz(path, tmp_path / "odd.npz", planner_options=np.array('{"d_max": 2.0, "colour": 1}'))
+    odd = rewrite_npz(path, tmp_path / "odd.npz", planner_config=np.array('{"graph": {"d_max": 2.0, "colour": 1}}'))
+    with pytest.raises(ValueError, match=r"odd.npz: graph has unknown fields \['colour'\]; its fields are \[.*'d_max'"):
+        SearchPolicy.load(odd, critic)
+    bad = rewrite_npz(path, tmp_path / "bad.npz", planner_config=np.array('{"graph": {"d_max": -1}}'))
+    with pytest.raises(ValueError, match=r"bad.npz: graph: d_max must be > 0"):
+        SearchPolicy.load(bad, critic)
+    code = rewrite_npz(path, tmp_path / "code.npz", planner_config=np.array('__import__("os")'))
+    with pytest.raises(ValueError, match=r"code.npz: its planner_config are not JSON"):
+        SearchPolicy.load(code, critic)
+    # files that hold the planner's options by name load too, and are checked as well
+    legacy = rewrite_npz(path, tmp_path / "legacy.npz", planner_config=None,
+                         planner_options=np.array('{"d_max": 3.0, "solver": "lns"}'))
+    loaded = SearchPolicy.load(legacy, critic)
+    assert loaded.planner.graph.d_max == 3.0 and loaded.planner.solver_config.name == "lns"
+    odd = rewrite_npz(path, tmp_path / "odd.npz", planner_config=None,
+                      planner_options=np.array('{"d_max": 2.0, "colour": 1}'))
     with pytest.raises(ValueError, match=r"odd.npz: its planner options \['colour'\] .*valid: \[.*'d_max'"):
         SearchPolicy.load(odd, critic)
 
 
 def test_unknown_planner_options_are_a_value_error_listing_the_valid_ones(nodes, models, tmp_path):
     critic, _ = models
-    with pytest.raises(ValueError, match=r"unknown options \['cmax'\]; planner options: \[.*'c_max'.*policy options"):
+    with pytest.raises(ValueError, match=r"unknown options \['cmax'\]; the options are \[.*'c_max'.*'hold'"):
         SearchPolicy.from_models(critic, critic, nodes, seed=0, cmax=0.5)
     path = SearchPolicy.from_models(critic, critic, nodes, seed=0).save(tmp_path / "p")
     with pytest.raises(UnknownOptionError, match=r"unknown options \['colour'\]"):

@@ -176,6 +176,6 @@ def test_the_planner_searches_configurations():
     assert plan.solved and plan.solver == "lacam", plan.message
     assert _validate_plan(plan, 24, 0.9) == []
     assert plan.soc == sum(plan.arrival_times)
-    assert planner.with_options(solver="lacam").options()["lacam_expansions_per_agent"] == 20_000
+    assert planner.with_options(solver="lacam").solver_config.lacam_expansions_per_agent == 20_000
     with pytest.raises(ValueError, match="lacam_expansions_per_agent"):
         planner.with_options(lacam_expansions_per_agent=0)

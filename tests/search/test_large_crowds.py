@@ -7,6 +7,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 import pytest
 
+from agents.search.config import SolverConfig
 from agents.search.mapf import MapfInstance, Proximity, compiled, solve_prioritized, validate
 from agents.search.mapf import sipp as sipp_module
 from agents.search.mapf.prioritized import start_blockers
@@ -255,7 +256,8 @@ def test_the_prioritized_budget_grows_with_the_graph(monkeypatch, nodes):
         return d, np.zeros_like(d)
 
     D, C = pairwise(obs, obs)
-    planner = BufferPlanner(obs, D, C, pairwise, solver="prioritized", prioritized_expansions_per_agent=100)
+    planner = BufferPlanner(obs, D, C, pairwise, solver=SolverConfig(name="prioritized",
+                                                                     prioritized_expansions_per_agent=100))
     assert planner.size_scale() == max(1.0, nodes / REFERENCE_BUFFER_NODES)
     seen = {}
 

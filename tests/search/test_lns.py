@@ -330,7 +330,7 @@ def test_planner_repair_solver_and_auto_fallback():
     plan = planner.plan(starts, goals)
     assert plan.solved and plan.solver == "lns", plan.message
     assert _validate_plan(plan, 24, 0.9) == []
-    assert planner.with_options(solver="auto").options()["repair_seed"] == 2
+    assert planner.with_options(solver="auto").solver_config.seed == 2
     # ECBS out of its budget: "auto" repairs
     starved = planner.with_options(solver="auto", expansion_limit=1, fallback_suboptimality=None)
     plan = starved.plan(starts[:12], goals[:12])

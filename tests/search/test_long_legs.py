@@ -5,6 +5,7 @@ import pytest
 
 import safe_mapf_envs  # noqa: F401  (registers the environments)
 from agents.search import BufferPlanner, SearchPolicy, build_problem_graph
+from agents.search.config import GraphConfig
 from agents.search.models import SecondOpinion
 from agents.search.pruning import admissible, long_legs
 from tests.conftest import StraightLineAgent
@@ -67,20 +68,22 @@ def test_the_plan_takes_no_leg_the_second_critic_reads_long(cost, c_max):
         return pairwise(a, b, cost)
 
     D, C = pw(ZIGZAG, ZIGZAG)
-    plain = BufferPlanner(ZIGZAG, D, C, pw, d_max=2.5, c_max=c_max, second_opinion=Reader()).plan(START, GOAL)
+    plain = BufferPlanner(ZIGZAG, D, C, pw, graph=GraphConfig(d_max=2.5, c_max=c_max),
+                          second_opinion=Reader()).plan(START, GOAL)
     assert plain.solved and hops(plain).max() > 1.8  # the straight hops along y = 0
-    planner = BufferPlanner(ZIGZAG, D, C, pw, d_max=2.5, c_max=c_max, second_opinion=Reader(), max_leg=10.0)
+    planner = BufferPlanner(ZIGZAG, D, C, pw, graph=GraphConfig(d_max=2.5, c_max=c_max, max_leg=10.0),
+                            second_opinion=Reader())
     plan = planner.plan(START, GOAL)
     assert plan.solved and hops(plan).max() <= 1.8
     if np.isfinite(c_max):
         assert plan.c_max > c_max  # the short hops pass the middle node: relaxed there
-    assert planner.options()["max_leg"] == 10.0
+    assert planner.graph.max_leg == 10.0
 
 
 def test_the_buffer_is_read_once_for_the_planners_with_options_makes():
     D, C = pairwise(ZIGZAG, ZIGZAG)
     reader = Reader()
-    base = BufferPlanner(ZIGZAG, D, C, pairwise, d_max=2.5, second_opinion=reader)
+    base = BufferPlanner(ZIGZAG, D, C, pairwise, graph=GraphConfig(d_max=2.5), second_opinion=reader)
     a = base.with_options(max_leg=10.0)
     a.plan(START, GOAL)
     first = reader.read
@@ -102,9 +105,9 @@ def test_the_buffer_is_read_once_for_the_planners_with_options_makes():
 def test_max_leg_is_refused_without_a_reader_or_when_not_positive():
     D, C = pairwise(ZIGZAG, ZIGZAG)
     with pytest.raises(ValueError, match="max_leg"):
-        BufferPlanner(ZIGZAG, D, C, pairwise, max_leg=10.0)
+        BufferPlanner(ZIGZAG, D, C, pairwise, graph=GraphConfig(max_leg=10.0))
     with pytest.raises(ValueError, match="max_leg"):
-        BufferPlanner(ZIGZAG, D, C, pairwise, max_leg=0.0, second_opinion=Reader())
+        BufferPlanner(ZIGZAG, D, C, pairwise, graph=GraphConfig(max_leg=0.0), second_opinion=Reader())
     with pytest.raises(ValueError, match="second_opinion"):
         build_problem_graph(ZIGZAG, D, C, pairwise, START, GOAL, d_max=2.5, c_max=np.inf, max_leg=10.0)
 
@@ -122,34 +125,36 @@ def two_agents():
 def test_a_saved_policy_keeps_max_leg_where_it_can_read_legs(two_agents, tmp_path):
     critic, driver, nodes = two_agents
     policy = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, max_leg=6.0)
-    assert isinstance(policy.planner.second_opinion, SecondOpinion) and policy.planner.max_leg == 6.0
+    assert isinstance(policy.planner.second_opinion, SecondOpinion) and policy.planner.graph.max_leg == 6.0
     with pytest.raises(ValueError, match="max_leg"):  # the driver is the critic: no second opinion
         SearchPolicy.from_models(critic, critic, nodes, d_max=12.0, max_leg=6.0)
     path = policy.save(tmp_path / "graph")
-    assert SearchPolicy.load(path, critic, driver).planner.max_leg == 6.0
-    assert SearchPolicy.load(path, critic).planner.max_leg is None  # nothing to read legs with
+    assert SearchPolicy.load(path, critic, driver).planner.graph.max_leg == 6.0
+    assert SearchPolicy.load(path, critic).planner.graph.max_leg is None  # nothing to read legs with
 
 
 def test_a_search_policy_with_a_fallback_plans_no_leg_it_would_hand_over(two_agents):
     critic, driver, nodes = two_agents
     beyond = {"fallback_beyond": 6.0}
-    policy = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
-                                      controller_kwargs=beyond)
-    assert policy.planner.second_opinion.model is driver and policy.planner.max_leg == 6.0
+    policy = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic, **beyond)
+    assert policy.planner.second_opinion.model is driver and policy.planner.graph.max_leg == 6.0
     # no fallback, no hand-over, a second opinion that is not the driver's, or max_leg set: left as it is
-    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, controller_kwargs=beyond).planner.max_leg is None
+    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, **beyond).planner.graph.max_leg is None
     assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
-                                    controller_kwargs={"fallback_beyond": None}).planner.max_leg is None
-    assert SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic, controller_kwargs=beyond,
-                                    second_opinion=SecondOpinion(critic)).planner.max_leg is None
-    kept = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic,
-                                    controller_kwargs=beyond, max_leg=float("inf"))
-    assert kept.planner.max_leg == float("inf")
+                                    fallback_beyond=None).planner.graph.max_leg is None
+    assert SearchPolicy.from_models(
+        critic, driver, nodes, d_max=12.0, fallback_model=critic, **beyond, second_opinion=SecondOpinion(critic),
+    ).planner.graph.max_leg is None
+    kept = SearchPolicy.from_models(critic, driver, nodes, d_max=12.0, fallback_model=critic, **beyond,
+                                    max_leg=float("inf"))
+    assert kept.planner.graph.max_leg == float("inf")
 
 
 def test_an_infinite_max_leg_reads_nothing():
     D, C = pairwise(ZIGZAG, ZIGZAG)
     reader = Reader()
-    plan = BufferPlanner(ZIGZAG, D, C, pairwise, d_max=2.5, second_opinion=reader, max_leg=np.inf).plan(START, GOAL)
+    plan = BufferPlanner(ZIGZAG, D, C, pairwise, graph=GraphConfig(d_max=2.5, max_leg=np.inf),
+                         second_opinion=reader).plan(START, GOAL)
     assert plan.solved and hops(plan).max() > 1.8 and reader.read == 0
-    assert BufferPlanner(ZIGZAG, D, C, pairwise, max_leg=np.inf).max_leg == np.inf  # needs no reader
+    unread = BufferPlanner(ZIGZAG, D, C, pairwise, graph=GraphConfig(max_leg=np.inf))
+    assert unread.graph.max_leg == np.inf  # needs no reader

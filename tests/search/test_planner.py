@@ -34,7 +34,7 @@ def grid_points(n=7, spacing=1.0):
 
 def make_planner(points, pairwise, **kw):
     D, C = pairwise(points, points)
-    return BufferPlanner(points, D, C, pairwise, **kw)
+    return BufferPlanner(points, D, C, pairwise).with_options(**kw)
 
 
 def test_waypoints_from_paths_hand_computed():
@@ -58,7 +58,7 @@ def test_two_agents_swap_plan_is_valid_and_timed():
     dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
     n = len(pts)
-    prox = Proximity(plan.problem.D, planner.proximity_radius)
+    prox = Proximity(plan.problem.D, planner.graph.proximity_radius)
     assert validate(dur, [n, n + 1], [n + 2, n + 3], res.paths, time_model="durative", proximity=prox) == []
     # both agents cross the grid: each arrival is at least the straight-line length in steps
     assert min(plan.arrival_times) >= 5
@@ -323,7 +323,7 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
     assert c.waypoint_observations(0)[:, 1].max() < 2.0
     # so does ``detour``: that detour is also over 1.5 times as long, and longer and costlier buys nothing
     d = make_planner(pts, short_way_round, d_max=2.5, c_max=1.0, detour=1.5)
-    assert d.options()["detour"] == 1.5 and d.with_options(c_max=2.0).detour == 1.5
+    assert d.graph.detour == 1.5 and d.with_options(c_max=2.0).graph.detour == 1.5
     assert d.plan(start, goal).waypoint_observations(0)[:, 1].max() < 2.0
     with pytest.raises(ValueError, match="detour"):
         make_planner(pts, pw, detour=0.9)
@@ -462,7 +462,7 @@ def test_the_planner_asks_its_second_opinion_on_observations():
         second = Second(reading)
         planner = make_planner(pts, critic, d_max=2.5, c_max=1.0,
                                second_opinion=None if reading is None else SecondOpinion(second))
-        assert "second_opinion" not in planner.options()
+        assert "second_opinion" not in planner.config()["graph"]
         assert planner.with_options(c_max=2.0).second_opinion is planner.second_opinion
         assert planner.sparsified(0.5)[0].second_opinion is planner.second_opinion
         plan = planner.plan(start, goal)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs  # noqa: F401
+from agents.search.config import GraphConfig, SolverConfig
 from agents.search.mapf import Proximity, validate
 from agents.search.planner import BufferPlanner
 from agents.self_sampling import observations_at
@@ -54,8 +55,10 @@ def world():
 def test_panorama_nodes_plan_valid_waypoints_for_several_agents(world):
     env, oracle, states, nodes, D, C = world
     assert nodes.shape[1:] == (4, 32, 32, 4) and nodes.dtype == np.uint8
-    planner = BufferPlanner(nodes, D, C, oracle.pairwise, d_max=7.0, proximity_radius=1.5,
-                            suboptimality=1.0, time_limit=10.0)
+    planner = BufferPlanner(
+        nodes, D, C, oracle.pairwise, graph=GraphConfig(d_max=7.0, proximity_radius=1.5),
+        solver=SolverConfig(suboptimality=1.0, time_limit=10.0),
+    )
     rng = np.random.default_rng(1)
     starts_xy = env.unwrapped.sample_states(40, rng)
     # three agents with starts and goals far apart (several edges each)
@@ -74,7 +77,7 @@ def test_panorama_nodes_plan_valid_waypoints_for_several_agents(world):
     dur = plan.problem.graph.distance.copy()
     dur.data = np.maximum(np.ceil(dur.data - 1e-9), 1.0)
     n = len(nodes)
-    prox = Proximity(plan.problem.D, planner.proximity_radius)
+    prox = Proximity(plan.problem.D, planner.graph.proximity_radius)
     assert validate(dur, [n, n + 1, n + 2], [n + 3, n + 4, n + 5], plan.cbs.paths, time_model="durative",
                     proximity=prox) == []
     plans = plan.agent_plans()
@@ -95,7 +98,10 @@ def test_panorama_nodes_plan_valid_waypoints_for_several_agents(world):
 
 def test_cost_pruned_panorama_plan_pays_less_predicted_cost(world):
     env, oracle, states, nodes, D, C = world
-    base = BufferPlanner(nodes, D, C, oracle.pairwise, d_max=7.0, suboptimality=1.0, time_limit=10.0)
+    base = BufferPlanner(
+        nodes, D, C, oracle.pairwise, graph=GraphConfig(d_max=7.0),
+        solver=SolverConfig(suboptimality=1.0, time_limit=10.0),
+    )
     rng = np.random.default_rng(5)
     pts = env.unwrapped.sample_states(60, rng)
     far = np.linalg.norm(pts[:, None] - pts[None], axis=-1)

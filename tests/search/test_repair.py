@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agents.search import BufferPlanner, SearchPolicy, replanning
+from agents.search.config import ControllerConfig, GraphConfig, ReplanConfig
 from agents.search.repair import EdgeMemory, edges_near
 
 
@@ -55,7 +56,7 @@ def world():
 def planner(world):
     nodes = corridor_nodes()
     D, C = world.pairwise(nodes, nodes)
-    return BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    return BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=None))
 
 
 START = np.array([1.0, 1.0], np.float32)
@@ -122,7 +123,7 @@ def test_edge_memory_counts_removes_and_round_trips(tmp_path):
 
 
 def test_a_failed_edge_is_recorded_and_not_planned_again(world, planner):
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None))
     obs = {"observation": START, "desired_goal": GOAL}
     policy.predict(obs)
     first = list(policy.routes["agent_0"])
@@ -147,7 +148,7 @@ def test_a_failed_edge_is_recorded_and_not_planned_again(world, planner):
 def test_a_lost_agent_localises_and_replans_from_where_it_stands(world, planner):
     """Stuck in front of the door, banning the door's neighbourhood (and then the door) cuts every route:
     the agent plans again over the whole graph from where it stands instead of giving the door up."""
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None))
     policy.predict({"observation": START, "desired_goal": GOAL})
     route = list(policy.routes["agent_0"])
     before_door = first_edge_into(route, DOOR)
@@ -185,8 +186,11 @@ def test_an_agent_stuck_twice_on_its_only_way_heads_past_that_waypoint():
     world = OpenWorld()
     nodes = np.array([(1.0 + 2 * i, 5.0) for i in range(5)], np.float32)
     D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
-    policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=1.5)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=None))
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=0.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=1.5),
+    )
     here = {"observation": np.array([0.0, 5.0], np.float32), "desired_goal": np.array([9.5, 5.0], np.float32)}
     policy.predict(here)
     assert policy.routes["agent_0"][1] == 0  # the first node on the way
@@ -221,7 +225,7 @@ def test_past_failed_waypoints_skips_only_what_failed_twice_and_is_no_detour():
 
 def test_an_agent_stuck_twice_in_front_of_a_door_keeps_the_door(world, planner):
     """Behind the door the critic sees a wall: heading past the door is no way, so the door stays."""
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None))
     policy.predict({"observation": START, "desired_goal": GOAL})
     before_door = first_edge_into(list(policy.routes["agent_0"]), DOOR)
     drive_until_stuck(policy, before_door)
@@ -232,7 +236,7 @@ def test_an_agent_stuck_twice_in_front_of_a_door_keeps_the_door(world, planner):
 
 
 def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_path):
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None))
     policy.predict({"observation": START, "desired_goal": GOAL})
     drive_until_stuck(policy, first_edge_into(list(policy.routes["agent_0"]), DOOR))
     path = policy.save(tmp_path / "graph")
@@ -240,13 +244,13 @@ def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_pa
     back = SearchPolicy.load(path, world, reach_threshold=1.5, safety_radius=None)
     assert back.memory.failures == policy.memory.failures and back.memory.successes == policy.memory.successes
     np.testing.assert_array_equal(back.planner.D, planner.D)
-    assert back.planner.options() == planner.options()
+    assert back.planner.config() == planner.config()
     policy.reset()
     obs = {"observation": START, "desired_goal": GOAL}
     policy.predict(obs)
     back.predict(obs)
     assert back.routes["agent_0"] == policy.routes["agent_0"]  # the loaded graph plans around the failed edge
-    assert SearchPolicy.load(path, world, c_max=3.0).planner.c_max == 3.0
+    assert SearchPolicy.load(path, world, c_max=3.0).planner.graph.c_max == 3.0
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a saved SearchPolicy graph"):
         SearchPolicy.load(tmp_path / "junk.npz", world)
@@ -259,7 +263,7 @@ def test_save_and_load_keep_the_graph_and_what_it_learned(world, planner, tmp_pa
 def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
     """Once agent_1 has arrived (it is no longer given to predict), a stuck agent_0 replans around the
     nodes by agent_1's goal, which now holds an immovable agent."""
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None)
+    policy = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None))
     parked_goal = np.array([9.0, 5.0], np.float32)
     both = {"agent_0": {"observation": START, "desired_goal": GOAL},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": parked_goal}}
@@ -268,10 +272,10 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
     policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
     near = policy._parked_nodes("agent_0")
     d = np.linalg.norm(planner.observations[near] - parked_goal, axis=1)
-    assert len(near) and (d < policy.ban_radius).all()
+    assert len(near) and (d < policy.config.replanning.ban_radius).all()
     nodes = planner.observations
     far = [i for i in range(len(nodes)) if i not in near]
-    assert (np.linalg.norm(nodes[far] - parked_goal, axis=1) >= policy.ban_radius).all()
+    assert (np.linalg.norm(nodes[far] - parked_goal, axis=1) >= policy.config.replanning.ban_radius).all()
     for _ in range(200):  # agent_0 stands still where it is: it gets stuck and replans
         if policy.stats.replans:
             break
@@ -285,7 +289,10 @@ def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth
     (0.7 of it): through the door, but clear of the nodes right by the parked agent, which the shortest
     route takes."""
     goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.8, 5.0], np.float32)
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.4)
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=2.4),
+    )
     both = {"agent_0": {"observation": START, "desired_goal": goal_0},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
     policy.predict(both)
@@ -312,16 +319,20 @@ def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
     goal_1 = np.array([6.5, 5.0], np.float32)
     both = {"agent_0": {"observation": START, "desired_goal": GOAL},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
-    plain = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order")
+    plain = SearchPolicy(planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None,
+                                                                     hold="order"))
     plain.predict(both)
     assert plain._goal_blockers("agent_1") == []
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=2.0)
+    policy = SearchPolicy(
+        planner, world,
+        controller=ControllerConfig(reach_threshold=1.5, safety_radius=None, hold="order", park_clearance=2.0),
+    )
     policy.predict(both)
     assert DOOR in policy.routes["agent_0"]
     assert policy._goal_blockers("agent_1") == [("agent_0", len(policy.routes["agent_0"]))]
     assert policy._goal_blockers("agent_0") == []  # agent_1 has a way around agent_0's goal
     with pytest.raises(ValueError, match="park_clearance"):
-        SearchPolicy(planner, world, park_clearance=0.0)
+        SearchPolicy(planner, world, controller=ControllerConfig(park_clearance=0.0))
 
 
 def test_cut_off_tells_a_cut_way_from_no_way():
@@ -349,13 +360,16 @@ def test_a_replan_does_not_pass_where_a_parked_agent_stands():
     world = OpenWorld()
     nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0, 9.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
     D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=1.0)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=1.0))
     start, goal_0 = np.array([3.0, 5.0], np.float32), np.array([7.0, 5.0], np.float32)
     stands = np.array([5.0, 5.0], np.float32)  # where agent_1 parks, short of its goal
     both = {"agent_0": {"observation": start, "desired_goal": goal_0},
             "agent_1": {"observation": np.array([5.0, 3.0], np.float32),
                         "desired_goal": np.array([5.0, 5.6], np.float32)}}
-    policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=0.5)
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=0.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=0.5),
+    )
     policy.predict(both)
     policy.predict({**both, "agent_1": {**both["agent_1"], "observation": stands}})
     assert 12 in policy.routes["agent_0"]  # straight on, by the node at (5, 5)
@@ -394,7 +408,10 @@ def test_edges_near_a_failed_edge_are_those_between_the_two_places():
 def test_a_stuck_agent_leaves_out_the_edges_beside_the_one_it_failed_on(world, planner):
     """Two panoramas alike make the critic take two far places for near ones, between every pair of
     nodes right by them: after failing on one such edge, an agent's replans leave them all out."""
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.5)
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=2.5),
+    )
     policy.predict({"observation": START, "desired_goal": GOAL})
     bad = first_edge_into(list(policy.routes["agent_0"]), DOOR)
     drive_until_stuck(policy, bad)
@@ -428,15 +445,17 @@ def test_an_agent_that_lost_the_node_it_set_off_for_links_no_more_to_nodes_besid
     world = TwinWorld()
     nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0, 9.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
     D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=None))
     twins = set(np.flatnonzero(np.linalg.norm(nodes - [9.0, 5.0], axis=1) < 2.5).tolist())
     goal = np.array([9.0, 9.0], np.float32)
     start, further = np.array([1.0, 1.0], np.float32), np.array([1.3, 1.0], np.float32)
     firsts, detached = {}, {}
     for radius, where in ((None, "further"), (3.0, "further"), (3.0, "start")):
         stuck_at = further if where == "further" else start
-        policy = SearchPolicy(planner, world, reach_threshold=0.5, safety_radius=None, ban_radius=0.5,
-                              detach_radius=radius)
+        policy = SearchPolicy(
+            planner, world, controller=ControllerConfig(reach_threshold=0.5, safety_radius=None),
+            replanning=ReplanConfig(ban_radius=0.5, detach_radius=radius),
+        )
         policy.predict({"observation": start, "desired_goal": goal})
         bad = policy.routes["agent_0"][1]
         assert np.allclose(nodes[bad], (9.0, 7.0))  # the wormhole: a single step to the far place
@@ -448,7 +467,7 @@ def test_an_agent_that_lost_the_node_it_set_off_for_links_no_more_to_nodes_besid
     assert detached[3.0, "further"] == beside and firsts[3.0, "further"] not in beside  # a way through the room
     assert detached[3.0, "start"] == set()  # it still finds the node near: nothing detached
     with pytest.raises(ValueError, match="detach_radius"):
-        SearchPolicy(planner, world, detach_radius=-1.0)
+        SearchPolicy(planner, world, replanning=ReplanConfig(detach_radius=-1.0))
 
 
 class GoalTwinWorld(OpenWorld):
@@ -469,13 +488,15 @@ def test_an_agent_that_lost_its_goal_on_the_last_leg_links_no_more_nodes_beside_
     world = GoalTwinWorld()
     nodes = np.array([(x, y) for x in (1.0, 3.0, 5.0, 7.0) for y in (1.0, 3.0, 5.0, 7.0, 9.0)], np.float32)
     D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=None))
     corner = set(np.flatnonzero(np.linalg.norm(nodes - [1.0, 9.0], axis=1) < 2.5).tolist())
     goal = np.array([9.0, 9.0], np.float32)
     lasts, detached = {}, {}
     for radius in (None, 3.0):
-        policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=0.5,
-                              detach_radius=radius)
+        policy = SearchPolicy(
+            planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+            replanning=ReplanConfig(ban_radius=0.5, detach_radius=radius),
+        )
         obs = {"observation": np.array([1.0, 1.0], np.float32), "desired_goal": goal}
         policy.predict(obs)
         assert policy.routes["agent_0"][-1] in corner  # the wormhole: one step from the corner to the goal
@@ -509,7 +530,7 @@ def two_door_world():
     doors = [(5.0, 4.3), (5.0, 5.7), (5.0, 9.5)]
     nodes = np.array(side + doors + [(10.0 - x, y) for x, y in side], np.float32)
     D, C = world.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, world.pairwise, d_max=2.5, proximity_radius=None)
+    planner = BufferPlanner(nodes, D, C, world.pairwise, graph=GraphConfig(d_max=2.5, proximity_radius=None))
     return world, planner, (len(side), len(side) + 1, len(side) + 2)
 
 
@@ -520,8 +541,10 @@ def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourho
     clear of the failed node alone where that is more than ``ban_detour`` predicted steps shorter."""
     world, planner, (low, high, far) = two_door_world()
     nodes = planner.observations
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
-                          ban_detour=ban_detour)
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=2.0, ban_detour=ban_detour),
+    )
     start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
     policy.predict({"observation": start, "desired_goal": goal})
     route = list(policy.routes["agent_0"])
@@ -536,9 +559,9 @@ def test_a_replan_keeps_clear_of_the_failed_waypoint_alone_where_its_neighbourho
         assert far in new and high not in new and policy.narrow_replans == 0
     else:
         assert high in new and far not in new and policy.narrow_replans == 1
-    assert SearchPolicy(planner, world).ban_detour == math.inf  # never, by default
+    assert SearchPolicy(planner, world).config.replanning.ban_detour == math.inf  # never, by default
     with pytest.raises(ValueError, match="ban_detour"):
-        SearchPolicy(planner, world, ban_detour=-1.0)
+        SearchPolicy(planner, world, replanning=ReplanConfig(ban_detour=-1.0))
 
 
 def circling(centre, t):
@@ -557,8 +580,10 @@ def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_
     monkeypatch.setattr(replanning, "REPAIR_STRETCH", stretch)
     world, planner, (low, _, _) = two_door_world()
     nodes = planner.observations
-    policy = SearchPolicy(planner, world, reach_threshold=1.5, safety_radius=None, ban_radius=2.0,
-                          repair_routes=repair)
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=2.0, repair_routes=repair),
+    )
     start, goal = np.array([1.5, 4.0], np.float32), np.array([8.5, 4.0], np.float32)
     goal_1 = goal + np.array([0.0, 0.5], np.float32)  # goals of their own, side by side
     t = 0
@@ -600,4 +625,4 @@ def test_an_agent_about_to_take_an_edge_another_agent_failed_on_plans_around_it_
     else:
         assert policy.route_repairs == 0 and failed & set(taken)
     assert policy.stats.replans == 1  # only the first agent got stuck
-    assert not SearchPolicy(planner, world).repair_routes  # off by default
+    assert not SearchPolicy(planner, world).config.replanning.repair_routes  # off by default

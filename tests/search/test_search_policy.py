@@ -1,10 +1,13 @@
 """SearchPolicy: plan on the buffer graph and drive, through an SB3-style predict()."""
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import safe_mapf_envs
 from agents.search import BufferPlanner, SearchPolicy, WaypointGraph, build_problem_graph
+from agents.search.config import ControllerConfig, GraphConfig
 from agents.search.graph import edge_mask
 
 ENV_ID = "SafeCentralObstacle-v0"
@@ -140,7 +143,7 @@ def test_bad_input_is_named(agent, nodes):
     with pytest.raises(TypeError, match="unknown options.*'cmax'"):
         SearchPolicy.from_models(agent, agent, nodes, cmax=0.3)
     with pytest.raises(ValueError, match="hold must be"):
-        SearchPolicy(None, agent, hold="never")
+        SearchPolicy(None, agent, controller=ControllerConfig(hold="never"))
     with pytest.raises(TypeError, match="predict"):
         SearchPolicy(None, object())
 
@@ -170,7 +173,7 @@ def test_nodes_can_come_from_a_replay_buffer(agent, nodes):
 
 def test_one_pruning_rule_for_the_buffer_graph_and_the_problem_graph(agent, nodes):
     D, C = agent.pairwise(nodes, nodes)
-    planner = BufferPlanner(nodes, D, C, agent.pairwise, d_max=9.0, c_max=0.3, relax_cost=False)
+    planner = BufferPlanner(nodes, D, C, agent.pairwise, graph=GraphConfig(d_max=9.0, c_max=0.3, relax_cost=False))
     problem = planner.problem_graph(nodes[:2] + 0.001, nodes[2:4] + 0.001)
     n = len(nodes)
     buffer_block = problem.graph.distance.toarray()[:n, :n] > 0
@@ -184,56 +187,41 @@ def test_one_pruning_rule_for_the_buffer_graph_and_the_problem_graph(agent, node
     assert (again.graph.distance != problem.graph.distance).nnz == 0
 
 
-def test_the_reach_threshold_default_follows_the_observation_type(agent):
-    """Panorama critics predict more than 2 steps to a goal already within the goal radius
-    often enough that waypoints would go unnoticed: their default threshold is larger."""
+def _panorama_model():
     from types import SimpleNamespace
 
     from gymnasium import spaces
 
-    from agents.search.models import PANORAMA_REACH_THRESHOLD, REACH_THRESHOLD, default_reach_threshold
-
     image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
-    vector = spaces.Box(0.0, 1.0, shape=(2,), dtype=np.float32)
-    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
-    vec = SimpleNamespace(observation_space=spaces.Dict({"observation": vector, "desired_goal": vector}))
-    assert default_reach_threshold(pano) == PANORAMA_REACH_THRESHOLD > REACH_THRESHOLD
-    assert default_reach_threshold(vec) == REACH_THRESHOLD == default_reach_threshold(agent)
-    assert SearchPolicy(None, agent).reach_threshold == REACH_THRESHOLD
-    assert SearchPolicy(None, agent, reach_threshold=1.5).reach_threshold == 1.5
+    return SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
 
 
-def test_controller_defaults_follow_the_observation_type(agent):
-    from types import SimpleNamespace
+def test_the_preset_follows_the_observation_type(agent):
+    """Panorama critics predict more than 2 steps to a goal already within the goal radius often
+    enough that waypoints would go unnoticed: their preset's threshold is larger, and its other
+    controller rules are on; a vector agent gets the plain defaults."""
+    from agents.search.config import PANORAMA_REACH_THRESHOLD, PRESETS, SearchConfig, preset_for
 
-    from gymnasium import spaces
-
-    from agents.search.models import PANORAMA_CONTROLLER_OPTIONS, default_controller_options
-
-    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
-    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
-    assert default_controller_options(pano) == PANORAMA_CONTROLLER_OPTIONS
-    assert PANORAMA_CONTROLLER_OPTIONS["settle_patience"] > 0 and PANORAMA_CONTROLLER_OPTIONS["self_margin"] > 0
-    assert default_controller_options(agent) == {} and SearchPolicy(None, agent).controller_kwargs == {}
-    custom = SearchPolicy(None, agent, controller_kwargs={"settle_patience": 3})
-    assert custom.controller_kwargs == {"settle_patience": 3}
+    pano = preset_for(_panorama_model())
+    assert pano is PRESETS["panorama"] and preset_for(agent) is PRESETS["vector"] == SearchConfig()
+    assert pano.controller.reach_threshold == PANORAMA_REACH_THRESHOLD > SearchConfig().controller.reach_threshold
+    assert pano.controller.hold == "order" and pano.controller.settle_patience > 0 and pano.controller.self_margin > 0
     # a leg the panorama driver's critic puts beyond two graph edges goes to the fallback at once
-    assert PANORAMA_CONTROLLER_OPTIONS["fallback_beyond"] == 14.0
+    assert pano.controller.fallback_beyond == 14.0
+    assert SearchPolicy(None, agent).config.controller == ControllerConfig()
+    custom = SearchPolicy(None, agent, controller=ControllerConfig(reach_threshold=1.5, settle_patience=3))
+    assert custom.config.controller.reach_threshold == 1.5 and custom.config.controller.settle_patience == 3
+    policy = SearchPolicy(None, agent, distance_model=SimpleNamespace(distance=None, **vars(_panorama_model())))
+    assert policy.config.controller == pano.controller  # the model that judges waypoints decides
 
 
 def test_the_planner_admits_longer_and_costlier_detours_back_for_panorama_agents_only(agent, nodes):
-    from types import SimpleNamespace
+    from agents.search.config import PANORAMA_DETOUR, preset_for
 
-    from gymnasium import spaces
-
-    from agents.search.models import PANORAMA_DETOUR, default_detour
-
-    image = spaces.Box(0, 255, shape=(4, 32, 32, 4), dtype=np.uint8)
-    pano = SimpleNamespace(observation_space=spaces.Dict({"observation": image, "desired_goal": image}))
-    assert default_detour(pano) == PANORAMA_DETOUR == 1.5 and default_detour(agent) is None
+    assert preset_for(_panorama_model()).graph.detour == PANORAMA_DETOUR == 1.5
     # a vector agent's graph keeps the detours (its tables were made so), unless asked
-    assert BufferPlanner.from_agent(agent, nodes[:20]).detour is None
-    assert BufferPlanner.from_agent(agent, nodes[:20], detour=2.0).detour == 2.0
+    assert BufferPlanner.from_agent(agent, nodes[:20]).graph.detour is None
+    assert BufferPlanner.from_agent(agent, nodes[:20], detour=2.0).graph.detour == 2.0
 
 
 def test_the_driver_is_the_graphs_second_opinion_where_it_is_another_critic(stand_in_models, nodes, tmp_path):

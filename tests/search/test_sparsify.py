@@ -62,7 +62,7 @@ def test_planner_sparsified_and_capped(stand_in_models):
     small, kept = planner.sparsified(2.0)
     assert len(kept) < 200 and small.observations.shape == (len(kept), 2)
     np.testing.assert_array_equal(small.D, planner.D[np.ix_(kept, kept)])
-    assert small.options() == planner.options()
+    assert small.config() == planner.config()
     start, goal = obs[:1], obs[-1:]
     assert small.plan(start, goal).solved
     capped = planner.with_options(max_edges=4)

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from agents.search.config import GraphConfig, SolverConfig
 from agents.search.mapf import EMPTY, CBSSolver, MapfInstance, Proximity, compile_constraints, solve_cbs, validate
 from agents.search.mapf.paths import AgentPath, Reservation
 from agents.search.mapf.successors import SPREAD_SHIFT, make_successors
@@ -131,10 +132,10 @@ def test_planner_passes_spread_routes_to_the_solver(monkeypatch):
         return np.maximum(d, 1.0), np.zeros_like(d)
 
     D, C = pairwise(pts, pts)
-    planner = BufferPlanner(pts, D, C, pairwise, d_max=1.5, spread_routes="near")
-    assert planner.options()["spread_routes"] == planner.with_options(c_max=2.0).spread_routes == "near"
-    assert BufferPlanner(pts, D, C, pairwise, d_max=1.5).spread_routes == "off"
+    planner = BufferPlanner(pts, D, C, pairwise, graph=GraphConfig(d_max=1.5), solver=SolverConfig(spread="near"))
+    assert planner.solver_config.spread == planner.with_options(c_max=2.0).solver_config.spread == "near"
+    assert BufferPlanner(pts, D, C, pairwise, graph=GraphConfig(d_max=1.5)).solver_config.spread == "off"
     plan = planner.plan(pts[[0, 3]], pts[[2, 5]])
     assert plan.solved and seen == ["near"]
     with pytest.raises(ValueError, match="spread must be one of"):
-        BufferPlanner(pts, D, C, pairwise, d_max=1.5, spread_routes=True)
+        BufferPlanner(pts, D, C, pairwise, graph=GraphConfig(d_max=1.5), solver=SolverConfig(spread=True))
