@@ -15,14 +15,14 @@ Protocol (the paper's section Experiments, on ``SafeCentralObstacle-v0``):
   runs and the success rate.
 
 :func:`evaluate` runs a grid of (method, agent count, difficulty) cells and returns per-run
-rows; :func:`aggregate` and :func:`markdown_table` turn them into the paper's Table I.
+rows; :func:`~baselines.metrics.aggregate` and :func:`markdown_table` turn them into the paper's Table I.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -37,9 +37,11 @@ from agents.search.sparsify import two_way_consistent
 from .anatomy import failures_field
 from .contact_anatomy import contact_reasons_field
 from .cost_anatomy import cost_split_field
+from .harness import run_tasks
 from .methods import METHODS, Method, execute
+from .metrics import DIFFICULTY_ORDER, mapf_metrics
 
-DIFFICULTIES = {"easy": 8.0, "medium": 4.0, "hard": 2.0}
+DIFFICULTIES = dict(zip(DIFFICULTY_ORDER, (8.0, 4.0, 2.0)))
 
 
 @dataclass
@@ -275,24 +277,6 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
     return row, ex
 
 
-def mapf_metrics(arrival: np.ndarray, steps: int) -> Dict[str, Any]:
-    """A run in the metrics of the MAPF learning community (POGEMA), from each agent's arrival
-    step (``-1``: it did not arrive) and the run's length in steps.
-
-    ``isr``: the share of agents that arrived (a run with every agent arrived counts for CSR);
-    ``soc``: sum of costs, each agent's steps until it arrived, the run's length for an agent
-    that did not; ``makespan``: the step at which the last agent arrived (the run's length when
-    some agent did not).
-    """
-    arrival = np.asarray(arrival)
-    if arrival.ndim != 1 or len(arrival) == 0:
-        raise ValueError(f"arrival must be a non-empty 1-D array of steps, got shape {arrival.shape}")
-    done = arrival >= 0
-    per_agent = np.where(done, arrival, steps)
-    return {"isr": float(done.mean()), "soc": int(per_agent.sum()),
-            "makespan": int(per_agent.max()) if done.all() else int(steps)}
-
-
 def evaluate(
     setup: EvaluationSetup,
     methods: Sequence[Method],
@@ -330,55 +314,19 @@ def evaluate(
     as :class:`~baselines.output.RowWriter` wrote them); their runs are not run again, and they
     open the returned rows (``on_run`` is called for the new runs only).
     """
-    import safe_mapf_envs
-
     if ray is not None:
         from .distributed import require_ray
 
         require_ray()  # fail before any work if Ray is missing
-    cells = [(k, d) for k in agent_counts for d in difficulties]
     tasks = []
-    for k, d in cells:
-        problems = make_problems(setup, d, k, n_problems, seed=seed)
-        tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
-    tasks = tasks[check_kept_rows(kept, tasks):]
+    for k in agent_counts:
+        for d in difficulties:
+            problems = make_problems(setup, d, k, n_problems, seed=seed)
+            tasks += [(m, prob) for m in _methods_for(methods, k, policy_agents, c_max_by_agents) for prob in problems]
+    check_kept_rows(kept, tasks)
     frozen = {name: m.frozen_copy() for name, m in (memories or {}).items()}
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(tasks) + len(kept), initial=len(kept), desc=desc, unit="run", mininterval=2.0)
-    rows: List[Dict[str, Any]] = list(kept)
-
-    def done(row, prob, ex) -> None:
-        rows.append(row)
-        if on_run is not None:
-            on_run(row, prob, ex)
-
-    if ray is None:
-        env, cell = None, None
-        for m, prob in tasks:
-            if cell != (prob.n_agents, prob.difficulty) or env is None:  # one env per cell
-                if env is not None:
-                    env.close()
-                env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=prob.n_agents, max_cycles=max_cycles)
-                cell = (prob.n_agents, prob.difficulty)
-            row, ex = run_row(setup, env, m, prob, seed, memory=frozen.get(m.name))
-            done(row, prob, ex)
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix_str(f"{m.name} N={prob.n_agents} {prob.difficulty}")
-        if env is not None:
-            env.close()
-    else:
-        from .distributed import in_task_order, run_on_ray
-
-        results = run_on_ray(setup, tasks, seed, max_cycles, run_row, address=ray, memories=frozen)
-        for j, row_j, ex_j in in_task_order(results, on_arrival=bar.update if bar is not None else None):
-            done(row_j, tasks[j][1], ex_j)
-    if bar is not None:
-        bar.close()
-    return rows
+    return run_tasks(setup, tasks, run_row, seed=seed, max_cycles=max_cycles, kept=kept, memories=frozen,
+                     on_run=on_run, progress=progress, desc=desc, ray=ray)
 
 
 def check_kept_rows(kept: Sequence[Dict[str, Any]], tasks: Sequence[Tuple[Method, Problem]],
@@ -531,49 +479,6 @@ def select_c_max(
     return CMaxSelection(chosen, list(grid), int(seed), table, rows)
 
 
-def _mean_std(x: np.ndarray):
-    if not len(x):
-        return math.nan, math.nan
-    return float(np.mean(x)), float(np.std(x))
-
-
-def aggregate(rows: Iterable[Dict[str, Any]]) -> List[Dict[str, Any]]:
-    """Per (method, agents, difficulty): success rate, mean +- std over successful runs, and the
-    median of the largest cumulative cost over them (``cost_median``); and, over all runs as the
-    MAPF learning community reports them (:func:`mapf_metrics`), ``csr`` (the share of runs in
-    which every agent arrived: the success rate), ``isr`` (the mean share of agents arrived),
-    ``soc_mean`` and ``makespan_mean``; and the safety figures over all runs, ``safety_rate`` (the
-    mean share of agents that never touched another agent) and ``contacts`` (the mean number of
-    contacts between agents per run) (``nan`` where the rows lack them)."""
-    groups: Dict[tuple, List[Dict[str, Any]]] = {}
-    for r in rows:
-        groups.setdefault((r["method"], int(r["agents"]), r["difficulty"]), []).append(r)
-    out = []
-    order = {d: i for i, d in enumerate(DIFFICULTIES)}
-    for (m, k, d), rs in sorted(groups.items(), key=lambda kv: (order.get(kv[0][2], 9), kv[0][1], kv[0][0])):
-        ok = [r for r in rs if _truthy(r["success"])]
-        agg = {"method": m, "agents": k, "difficulty": d, "runs": len(rs), "success_rate": len(ok) / len(rs)}
-        for key in ("cost_max", "cost_mean", "collisions", "steps", "planning_time"):
-            mu, sd = _mean_std(np.array([float(r[key]) for r in ok]))
-            name = "cost" if key == "cost_max" else key
-            agg[f"{name}_mean"], agg[f"{name}_std"] = mu, sd
-        agg["mean_cost_mean"] = agg.pop("cost_mean_mean")
-        agg["mean_cost_std"] = agg.pop("cost_mean_std")
-        # robust to the few runs in which an agent stalls for a long time
-        agg["cost_median"] = float(np.median([float(r["cost_max"]) for r in ok])) if ok else math.nan
-        agg["csr"] = agg["success_rate"]
-        for key, name in (("isr", "isr"), ("soc", "soc_mean"), ("makespan", "makespan_mean"),
-                          ("safety_rate", "safety_rate"), ("collisions", "contacts")):
-            vals = [float(r[key]) for r in rs if r.get(key) not in (None, "")]
-            agg[name] = float(np.mean(vals)) if len(vals) == len(rs) else math.nan
-        out.append(agg)
-    return out
-
-
-def _truthy(v) -> bool:
-    return v in (True, 1, "True", "true", "1")
-
-
 def markdown_table(agg: Sequence[Dict[str, Any]], methods: Optional[Sequence[str]] = None,
                    value: str = "cost", bold_min_success: float = 0.9) -> str:
     """The paper's Table I layout: rows (difficulty, agents), one column per method.
@@ -630,5 +535,5 @@ def write_csv(rows: Sequence[Dict[str, Any]], path) -> None:
 
 
 __all__ = ["C_MAX_QUANTILES", "CMaxSelection", "DIFFICULTIES", "EvaluationSetup", "Problem", "REPAIR_SEED_OFFSET",
-           "ROW_FIELDS", "VALIDATION_SEED_OFFSET", "aggregate", "c_max_grid", "evaluate", "learn_edge_memory",
-           "make_problems", "mapf_metrics", "markdown_table", "safety_note", "select_c_max", "write_csv"]
+           "ROW_FIELDS", "VALIDATION_SEED_OFFSET", "c_max_grid", "evaluate", "learn_edge_memory",
+           "make_problems", "markdown_table", "safety_note", "select_c_max", "write_csv"]

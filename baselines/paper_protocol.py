@@ -48,8 +48,10 @@ from scipy.sparse.csgraph import dijkstra
 
 from agents.run_folder import write_atomic
 
-from .evaluation import DIFFICULTIES, Problem, aggregate, check_kept_rows, markdown_table, write_csv
+from .evaluation import DIFFICULTIES, Problem, check_kept_rows, markdown_table, write_csv
+from .harness import run_tasks
 from .methods import MARL_METHODS, Method
+from .metrics import aggregate
 
 #: the published code's c_max grid, as factors of the trained cost limit
 PAPER_C_MAX_FACTORS = (0.1, 0.25, 0.5, 0.75, 1.0)
@@ -338,8 +340,6 @@ def evaluate_paper(
     :func:`~baselines.evaluation.evaluate` does: the same rows in the same order. ``kept``: the rows
     of an interrupted evaluation with the same arguments, as in :func:`~baselines.evaluation.evaluate`.
     """
-    import safe_mapf_envs
-
     if ray is not None:
         from .distributed import require_ray
 
@@ -357,46 +357,11 @@ def evaluate_paper(
                     continue
                 variants = [m.with_options(c_max=c) for c in grid] if math.isfinite(m.c_max) else [m]
                 runs += [(v, p) for v in variants for p in problems]
-    runs = runs[check_kept_rows(kept, runs, with_c_max=True):]
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(runs) + len(kept), initial=len(kept), desc="evaluate (paper protocol)", unit="run",
-                   mininterval=2.0)
-    rows: List[Dict[str, Any]] = list(kept)
-
-    def done(row: Dict[str, Any]) -> None:
-        rows.append(row)
-        if on_row is not None:
-            on_row(row)
-
-    env, cell = None, None
-    try:
-        if ray is not None:
-            from .distributed import in_task_order, run_on_ray
-
-            results = run_on_ray(setup, runs, seed, max_cycles, paper_row, address=ray,
-                                 env_kwargs={"agent_collisions": False})
-            for _, row, _ex in in_task_order(results, on_arrival=bar.update if bar is not None else None):
-                done(row)
-            return rows
-        for m, p in runs:
-            if env is None or cell != p.n_agents:
-                if env is not None:
-                    env.close()
-                env = safe_mapf_envs.parallel_env(setup.env_id, n_agents=p.n_agents, max_cycles=max_cycles,
-                                                  agent_collisions=False)
-                cell = p.n_agents
-            done(paper_row(setup, env, m, p, seed)[0])
-            if bar is not None:
-                bar.update(1)
-    finally:
-        if env is not None:
-            env.close()
-        if bar is not None:
-            bar.close()
-    return rows
+    check_kept_rows(kept, runs, with_c_max=True)
+    return run_tasks(setup, runs, paper_row, seed=seed, max_cycles=max_cycles, kept=kept,
+                     env_kwargs={"agent_collisions": False},
+                     on_run=None if on_row is None else lambda row, _problem, _ex: on_row(row),
+                     progress=progress, desc="evaluate (paper protocol)", ray=ray)
 
 
 def paper_row(setup: PaperSetup, env, method: Method, problem: Problem, seed: int,

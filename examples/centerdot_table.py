@@ -24,8 +24,8 @@ import math
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
-from baselines.evaluation import aggregate
 from baselines.methods import METHODS
+from baselines.metrics import aggregate
 from baselines.paper_tables import TABLE1, TABLE1_METHODS
 
 

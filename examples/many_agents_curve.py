@@ -27,7 +27,7 @@ from typing import Any, Dict, List
 
 import numpy as np
 
-from baselines.evaluation import aggregate
+from baselines.metrics import aggregate
 
 
 def cells(folder: Path, method: str) -> List[Dict[str, Any]]:

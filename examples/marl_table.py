@@ -24,7 +24,8 @@ import argparse
 import math
 from typing import Any, Dict, List
 
-from baselines.evaluation import aggregate, markdown_table
+from baselines.evaluation import markdown_table
+from baselines.metrics import aggregate
 from baselines.output import read_rows as read_runs
 from baselines.paper_protocol import choose_best_c_max
 

@@ -34,7 +34,8 @@ import json
 import math
 from pathlib import Path
 
-from baselines.evaluation import aggregate, safety_note
+from baselines.evaluation import safety_note
+from baselines.metrics import aggregate
 from baselines.output import read_rows
 from baselines.paper_protocol import choose_best_c_max
 from baselines.paper_tables import TABLE2, TABLE2_METHODS, TABLE2_SCENES

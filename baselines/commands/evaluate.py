@@ -381,7 +381,6 @@ def run(args: argparse.Namespace) -> int:
         REPAIR_SEED_OFFSET,
         VALIDATION_SEED_OFFSET,
         EvaluationSetup,
-        aggregate,
         evaluate,
         learn_edge_memory,
         markdown_table,
@@ -389,6 +388,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
     )
     from baselines.methods import DEFAULT_METHODS, get_methods
+    from baselines.metrics import aggregate
 
     args.env = env_for_map(args.env, args.map_file)  # a map of one's own: its id, registered
     repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 import agents
-import baselines.evaluation as ev
+import baselines.metrics
 from baselines.cli import build_parser, main
 from baselines.output import RowWriter, check_output_dir
 
@@ -91,7 +91,7 @@ def test_evaluate_keeps_the_rows_of_a_run_that_fails_later(tmp_path, capsys, mon
     def broken(rows):
         raise ValueError("aggregation failed")
 
-    monkeypatch.setattr(ev, "aggregate", broken)
+    monkeypatch.setattr(baselines.metrics, "aggregate", broken)
     code = main(["evaluate", "--agents", "1", "--problems", "2", "--difficulty", "easy", "--methods", "sorb",
                  "--nodes", "150", "--no-figure", "--no-progress", "--out", str(tmp_path)])
     assert code == 2 and "aggregation failed" in _err(capsys)

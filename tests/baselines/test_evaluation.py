@@ -9,7 +9,6 @@ import safe_mapf_envs
 from agents.search.stats import ACTIVITIES
 from baselines.evaluation import (
     EvaluationSetup,
-    aggregate,
     c_max_grid,
     evaluate,
     make_problems,
@@ -17,6 +16,7 @@ from baselines.evaluation import (
     write_csv,
 )
 from baselines.methods import METHODS, execute, get_methods
+from baselines.metrics import aggregate
 
 
 @pytest.fixture(scope="module")
@@ -401,7 +401,7 @@ def test_evaluate_command_writes_the_failure_anatomy_and_takes_hold_and_repairs(
 
 
 def test_mapf_metrics_hand_computed():
-    from baselines.evaluation import mapf_metrics
+    from baselines.metrics import mapf_metrics
 
     # three agents arrive at steps 4, 9, 7: all arrived, makespan the last arrival
     assert mapf_metrics(np.array([4, 9, 7]), 9) == {"isr": 1.0, "soc": 20, "makespan": 9}
@@ -427,7 +427,7 @@ def test_many_agents_curve_reads_evaluate_rows(tmp_path, monkeypatch, capsys):
     import runpy
     import sys
 
-    from baselines.evaluation import mapf_metrics
+    from baselines.metrics import mapf_metrics
 
     folder = tmp_path / "grid"
     folder.mkdir()

@@ -10,8 +10,8 @@ import pytest
 from conftest import StraightLineAgent
 
 import safe_mapf_envs
-from baselines.evaluation import aggregate
 from baselines.methods import METHODS
+from baselines.metrics import aggregate
 from baselines.paper_protocol import (
     PAPER_C_MAX_FACTORS,
     PaperSetup,
