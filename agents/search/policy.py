@@ -26,9 +26,8 @@ import torch; the models are only called through ``predict``, ``distance`` and `
 from __future__ import annotations
 
 import json
-import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -38,11 +37,12 @@ from ..run_folder import read_npz
 from .config import OPTIONS, ControllerConfig, ReplanConfig, SearchConfig, UnknownOptionError, preset_for
 from .controller import AgentPlan, WaypointController
 from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
-from .graph import NodePairwise, ProblemGraph, check_graph_nodes, env_record
+from .episode import AgentState, Episode, Leg
+from .graph import NodePairwise, check_graph_nodes, env_record
 from .models import buffer_observations, check_models, default_second_opinion, distance_fn, env_observations, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
 from .repair import EdgeMemory
-from .replanning import StuckReplanning
+from .replanning import Replanner
 from .safety import SafetyLayer, SafetyState
 from .stats import ControllerStats
 from .waypoints import direct_plans
@@ -77,24 +77,7 @@ def _saved_config(path: Union[str, Path], text: Any, key: str) -> SearchConfig:
         raise ValueError(f"{path}: {e}") from None
 
 
-@dataclass(frozen=True)
-class Leg:
-    """The stretch of its route an agent is on: from the node it left last to its current target.
-
-    Attributes:
-        source: buffer node id it left, or ``None`` for its own start (or the place it replanned from).
-        target: buffer node id it heads for, or ``None`` for its goal.
-        predicted: the critic's predicted steps from ``source`` to ``target``.
-        started: controller step at which the route holding this leg was planned.
-    """
-
-    source: Optional[int]
-    target: Optional[int]
-    predicted: float
-    started: int
-
-
-class SearchPolicy(StuckReplanning):
+class SearchPolicy:
     """Search on the replay buffer with CBS, driven by a goal-conditioned policy (``predict``).
 
     Args:
@@ -339,37 +322,44 @@ class SearchPolicy(StuckReplanning):
         self.controller: Optional[WaypointController] = None
         #: the plan of the current episode (``None`` before the first call, or without a planner)
         self.current_plan: Optional[MultiAgentPlan] = None
-        #: agent names in planning order
-        self.agents: List[str] = []
-        #: per agent, the node ids of its current route (the planner's problem graph)
-        self.routes: Dict[str, List[int]] = {}
-        #: per agent, the problem graph its route lives on, its goal's id there and the step it was planned at
-        self._route_graph: Dict[str, Tuple[ProblemGraph, int, int]] = {}
-        self._banned: Dict[str, List[int]] = {}
-        #: per agent: the buffer edges it failed on this episode (left out of its replans)
-        self._failed_edges: Dict[str, List[Tuple[int, int]]] = {}
-        #: per agent: the buffer nodes its replans may not link its start to (it failed to reach them)
-        self._detached: Dict[str, List[int]] = {}
-        #: per agent: the buffer nodes its replans may not link to its goal (it failed to reach its goal from them)
-        self._goal_detached: Dict[str, List[int]] = {}
-        #: per agent: the waypoint index last seen, and whether its route changed since (for successes)
-        self._seen_index: Dict[str, int] = {}
-        #: per agent: the waypoint nodes it failed to reach since its last full plan
-        self._failed: Dict[str, List[int]] = {}
-        self._goals: Dict[str, np.ndarray] = {}
-        self._last_obs: Dict[str, np.ndarray] = {}
-        self._last_names: set = set()
-        self._cut_cache: Dict[Tuple[int, ...], bool] = {}
-        #: seconds spent on the episode's first plan, and on the replans since
-        self.planning_time = 0.0
-        self.replan_time = 0.0
-        #: replans of the episode that kept clear of the failed waypoints alone (``ban_detour``)
-        self.narrow_replans = 0
-        #: replans of the episode before a leg along an edge another agent failed on (``repair_routes``)
-        self.route_repairs = 0
-        self._leg_checked: Dict[str, Tuple[AgentPlan, int]] = {}
-        #: what the safety layer did in the episode
-        self.safety_state = SafetyState()
+        #: what the policy knows of the current episode, one record per agent
+        self.episode = Episode()
+        self.replanner: Optional[Replanner] = None
+
+    @property
+    def agents(self) -> List[str]:
+        """Agent names of the episode in planning order."""
+        return self.episode.agents
+
+    @property
+    def routes(self) -> Dict[str, List[int]]:
+        """Per agent, the node ids of its current route (the planner's problem graph)."""
+        return {a: st.route for a, st in self.episode.states.items() if self.planner is not None}
+
+    @property
+    def planning_time(self) -> float:
+        """Seconds spent on the episode's first plan."""
+        return self.episode.planning_time
+
+    @property
+    def replan_time(self) -> float:
+        """Seconds spent on the episode's replans."""
+        return self.episode.replan_time
+
+    @property
+    def narrow_replans(self) -> int:
+        """Replans of the episode that kept clear of the failed waypoints alone (``ban_detour``)."""
+        return self.episode.narrow_replans
+
+    @property
+    def route_repairs(self) -> int:
+        """Replans of the episode before a leg along an edge another agent failed on (``repair_routes``)."""
+        return self.episode.route_repairs
+
+    @property
+    def safety_state(self) -> SafetyState:
+        """What the safety layer did in the episode."""
+        return self.episode.safety
 
     @property
     def stats(self) -> ControllerStats:
@@ -384,20 +374,10 @@ class SearchPolicy(StuckReplanning):
 
     def leg(self, agent: str) -> Optional[Leg]:
         """The edge of its planned route ``agent`` is on now (``None`` without a planned route)."""
-        if self.controller is None or self.planner is None or agent not in self._route_graph:
+        state = self.episode.states.get(agent)
+        if self.controller is None or self.planner is None or state is None:
             return None
-        route = self.routes.get(agent, [])
-        problem, goal_id, started = self._route_graph[agent]
-        k = self.controller.index[agent]
-        target = route[k] if k < len(route) else goal_id
-        source = route[k - 1] if k > 0 else None
-        n = problem.n_buffer
-        predicted = math.nan if source is None else float(problem.D[source, target])
-
-        def buffer_id(i: Optional[int]) -> Optional[int]:
-            return None if i is None or i >= n else int(i)
-
-        return Leg(buffer_id(source), buffer_id(target), predicted, started)
+        return state.leg(self.controller.index[agent])
 
     # ------------------------------------------------------------------ acting
     def predict(
@@ -440,19 +420,20 @@ class SearchPolicy(StuckReplanning):
         if self._new_episode(current, goals, episode_start):
             self._start(current, goals)
         assert self.controller is not None
-        self._last_obs.update(current)
-        self._last_names = set(current)
+        for a, o in current.items():
+            self.episode.states[a].last_obs = o
+        self.episode.live = set(current)
         replanning = self.config.replanning
-        if replanning.repair_routes and self.planner is not None and replanning.replan_when_stuck:
-            self._repair_routes(current)
+        if replanning.repair_routes and self.replanner is not None and replanning.replan_when_stuck:
+            self.replanner.repair_routes(self.controller, current)
         actions = self.controller.act(current)
         if self.safety is not None and not single:
             if positions is None:
                 raise ValueError("this SearchPolicy has a safety layer: pass the team's positions, "
                                  "predict(obs, positions=team_positions(env))")
-            actions = self.safety.filter_agents(actions, positions, self.safety_state)
+            actions = self.safety.filter_agents(actions, positions, self.episode.safety)
             # kept from moving as asked for a while: stuck, as far as the plan goes
-            self.controller.report_stuck(self.safety_state.deadlocked)
+            self.controller.report_stuck(self.episode.safety.deadlocked)
         self._record_progress()
         if single:
             act = actions["agent_0"]
@@ -465,33 +446,35 @@ class SearchPolicy(StuckReplanning):
         ``status`` says whether it was solved; unsolved, the agents keep their plans)."""
         if self.controller is None or self.planner is None:
             raise ValueError("nothing to replan: " + ("no planner" if self.planner is None else "call predict() first"))
-        names = list(agents) if agents is not None else [a for a in self.agents if a in self._last_names]
-        unknown = [a for a in names if a not in self._last_obs]
+        ep = self.episode
+        names = list(agents) if agents is not None else [a for a in ep.agents if a in ep.live]
+        unknown = [a for a in names if a not in ep.states or ep.states[a].last_obs is None]
         if unknown or not names:
-            raise ValueError(f"cannot replan {unknown or names}: agents seen are {sorted(self._last_obs)}")
+            seen = sorted(a for a, st in ep.states.items() if st.last_obs is not None)
+            raise ValueError(f"cannot replan {unknown or names}: agents seen are {seen}")
         t0 = time.perf_counter()
-        plan = self._plan(np.stack([self._last_obs[a] for a in names]), np.stack([self._goals[a] for a in names]))
+        starts = [ep.states[a].last_obs for a in names]
+        plan = self._plan(np.stack([o for o in starts if o is not None]), np.stack([ep.states[a].goal for a in names]))
         if plan.solved:
             t = self.controller.t
             new = {}
             for i, (a, p) in enumerate(self._agent_plans(plan, names).items()):
                 shifted = None if p.depart_times is None else [d + t if d > 0 else 0 for d in p.depart_times]
                 new[a] = AgentPlan(p.waypoints, p.goal, shifted, p.starts_at_first, p.after)
-                self.routes[a] = list(plan.nodes[i])
                 assert plan.problem is not None  # a solved plan keeps its problem graph
-                self._route_graph[a] = (plan.problem, plan.problem.goal_ids[i], t)
-                self._banned[a] = []
-                self._failed[a] = []
+                state = ep.states[a]
+                state.set_route(plan.nodes[i], plan.problem, plan.problem.goal_ids[i], t)
+                state.banned, state.failed = [], []
             self.controller.set_plans(new)
-            self._seen_index.update({a: 0 for a in names})
-        self.replan_time += time.perf_counter() - t0
+        ep.replan_time += time.perf_counter() - t0
         return plan
 
     # ------------------------------------------------------------------ internals
     def _shape(self) -> Tuple[int, ...]:
         if self.planner is not None:
             return tuple(self.planner.observations.shape[1:])
-        return tuple(next(iter(self._goals.values())).shape) if self._goals else ()
+        states = self.episode.states
+        return tuple(next(iter(states.values())).goal.shape) if states else ()
 
     def _one(self, x: np.ndarray, what: str, single: bool) -> np.ndarray:
         """One agent's observation, checked against the graph's observation shape."""
@@ -507,16 +490,19 @@ class SearchPolicy(StuckReplanning):
 
     def _new_episode(self, current: Dict[str, np.ndarray], goals: Dict[str, np.ndarray],
                      episode_start: Optional[Union[bool, np.ndarray]]) -> bool:
+        states = self.episode.states
         if (self.controller is None or (episode_start is not None and bool(np.any(episode_start)))
-                or any(a not in self._goals for a in current) or not set(current) <= self._last_names):
+                or any(a not in states for a in current) or not set(current) <= self.episode.live):
             return True
-        return any(not np.array_equal(goals[a], self._goals[a]) for a in current)
+        return any(not np.array_equal(goals[a], states[a].goal) for a in current)
 
     def _start(self, current: Dict[str, np.ndarray], goals: Dict[str, np.ndarray]) -> None:
         """Plan for every agent given and set up the controller."""
         self.reset()
         t0 = time.perf_counter()
         names = list(current)
+        ep = self.episode
+        ep.states = {a: AgentState(goal=goals[a]) for a in names}
         starts = np.stack([current[a] for a in names])
         goal_arr = np.stack([goals[a] for a in names])
         plans: Dict[str, AgentPlan]
@@ -526,22 +512,18 @@ class SearchPolicy(StuckReplanning):
             plan = self._plan(starts, goal_arr)
             self.current_plan = plan
             plans = self._agent_plans(plan, names) if plan.solved else direct_plans(goal_arr, names)
-            self.routes = {a: list(plan.nodes[i][:len(plans[a].waypoints)]) if plan.solved else []
-                           for i, a in enumerate(names)}
             if plan.solved and plan.problem is not None:
-                self._route_graph = {a: (plan.problem, plan.problem.goal_ids[i], 0) for i, a in enumerate(names)}
-            self._banned = {a: [] for a in names}
-            self._failed = {a: [] for a in names}
-            self._failed_edges = {a: [] for a in names}
-            self._detached = {a: [] for a in names}
-            self._goal_detached = {a: [] for a in names}
-            self._seen_index = {a: 0 for a in names}
-        self.planning_time = time.perf_counter() - t0
-        self.agents = names
-        self._goals = dict(goals)
-        searching = self.planner is not None
-        replan = self._replan_stuck if searching and self.config.replanning.replan_when_stuck else None
-        goal_order = self._goal_blockers if searching and self.config.controller.hold == "order" else None
+                for i, a in enumerate(names):
+                    ep.states[a].set_route(plan.nodes[i][:len(plans[a].waypoints)], plan.problem,
+                                           plan.problem.goal_ids[i], 0)
+            self.replanner = Replanner(self.planner, self.config, self.memory, self._distance, ep)
+        ep.planning_time = time.perf_counter() - t0
+        ep.agents = names
+        replanner = self.replanner if self.config.replanning.replan_when_stuck else None
+        replan = None if replanner is None else (
+            lambda agent, ob, current_plan: replanner.stuck(self.controller, agent, ob, current_plan))
+        goal_order = self._goal_blockers if self.planner is not None and self.config.controller.hold == "order" \
+            else None
         self.controller = WaypointController(self._policy, self._distance, plans, self.config.controller,
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
                                              goal_order=goal_order)
@@ -577,25 +559,29 @@ class SearchPolicy(StuckReplanning):
     def _record_progress(self) -> None:
         """Record the buffer edges agents got through since the last step in :attr:`memory`."""
         assert self.controller is not None
-        n = len(self.planner.observations) if self.planner is not None else 0
-        for a, seen in self._seen_index.items():
-            now = self._seen_index[a] = self.controller.index.get(a, seen)
-            self.memory.record_route(self.routes.get(a, []), seen, now, n)
+        if self.planner is None:
+            return
+        n = len(self.planner.observations)
+        for a, state in self.episode.states.items():
+            seen = state.seen_index
+            now = state.seen_index = self.controller.index.get(a, seen)
+            self.memory.record_route(state.route, seen, now, n)
 
     def _goal_blockers(self, agent: str) -> List[Tuple[str, int]]:
         """The controller's ``goal_order``: :func:`~agents.search.dependencies.goal_passers` of
         ``agent`` on the routes as they are now, within the planner's proximity radius."""
         assert self.planner is not None and self.controller is not None
-        if agent not in self._route_graph:
+        ep = self.episode
+        state = ep.states[agent]
+        if state.problem is None:
             return []
-        others = {b: (self.routes.get(b, []), *self._route_graph[b][:2], self.controller.index.get(b, 0))
-                  for b in self.agents if b != agent and b in self._route_graph}
-        problem, goal, _ = self._route_graph[agent]
-        out = goal_passers(problem, goal, others, float(self.planner.graph.proximity_radius or 0.0))
+        others = {b: (ep.states[b].route, ep.states[b].problem, ep.states[b].goal_id, self.controller.index.get(b, 0))
+                  for b in ep.routed() if b != agent}
+        out = goal_passers(state.problem, state.goal_id, others, float(self.planner.graph.proximity_radius or 0.0))
         clearance = self.config.controller.park_clearance
         if clearance is not None:
-            under_way = {b: v for b, v in others.items() if b in self._last_names and b not in dict(out)}
-            out += shut_out(problem, goal, under_way, clearance, self._cut_cache)
+            under_way = {b: v for b, v in others.items() if b in ep.live and b not in dict(out)}
+            out += shut_out(state.problem, state.goal_id, under_way, clearance, ep.cut_cache)
         return out
 
 

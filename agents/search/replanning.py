@@ -1,5 +1,6 @@
 """What :class:`~agents.search.policy.SearchPolicy` does for an agent its controller finds stuck
-(``replan_when_stuck``). A mixin: the policy keeps the episode state these methods read and write.
+(``replan_when_stuck``): :class:`Replanner`, which reads and writes the episode's
+:class:`~agents.search.episode.AgentState` records and the edge memory.
 
 - The edge the agent was on is recorded: in its failed edges for this episode, with the edges
   between the nodes right by its two ends (:func:`~agents.search.repair.edges_near`: a critic that
@@ -47,6 +48,7 @@ import numpy as np
 from .config import SearchConfig
 from .controller import AgentPlan
 from .dependencies import nodes_near
+from .episode import AgentState, Episode
 from .repair import edges_near, near_either_way, past_failed_waypoints
 
 #: a route repair (``repair_routes``) is taken only where its predicted length is at most this many
@@ -54,45 +56,42 @@ from .repair import edges_near, near_either_way, past_failed_waypoints
 REPAIR_STRETCH = 2.0
 
 
-class StuckReplanning:
-    """Replans for stuck agents; mixed into :class:`~agents.search.policy.SearchPolicy`."""
+class Replanner:
+    """Replans for stuck agents, and before legs along edges others failed on (``repair_routes``).
 
-    planner: Any
-    controller: Any
-    memory: Any
-    config: SearchConfig
-    narrow_replans: int
-    route_repairs: int
-    _leg_checked: Dict[str, Tuple[AgentPlan, int]]
-    agents: List[str]
-    routes: Dict[str, List[int]]
-    replan_time: float
-    _route_graph: Dict[str, Tuple[Any, int, int]]
-    _banned: Dict[str, List[int]]
-    _failed: Dict[str, List[int]]
-    _failed_edges: Dict[str, List[Tuple[int, int]]]
-    _detached: Dict[str, List[int]]
-    _goal_detached: Dict[str, List[int]]
-    _seen_index: Dict[str, int]
-    _goals: Dict[str, np.ndarray]
-    _last_obs: Dict[str, np.ndarray]
-    _last_names: set
-    leg: Callable[[str], Any]
-    _distance: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    Args:
+        planner: the policy's :class:`~agents.search.planner.BufferPlanner`.
+        config: the policy's :class:`~agents.search.config.SearchConfig` (its ``replanning`` part and
+            ``budget``).
+        memory: the graph's :class:`~agents.search.repair.EdgeMemory` (failures are recorded in it).
+        distance: ``distance(obs[B], goal[B]) -> [B]`` of the critic that judges waypoints.
+        episode: the policy's current :class:`~agents.search.episode.Episode`.
+    """
 
-    def _exclude_edges(self, agent: str, shared: bool = False) -> np.ndarray:
+    def __init__(self, planner: Any, config: SearchConfig, memory: Any,
+                 distance: Callable[[np.ndarray, np.ndarray], np.ndarray], episode: Episode) -> None:
+        self.planner = planner
+        self.rules = config.replanning
+        self.budget = config.budget
+        self.memory = memory
+        self.distance = distance
+        self.episode = episode
+
+    def exclude_edges(self, agent: str, shared: bool = False) -> np.ndarray:
         """The edges ``agent``'s replans leave out: those the memory removed and those it failed on
         (``shared``: those any agent failed on this episode)."""
-        own = [e for b in (self.agents if shared else [agent]) for e in self._failed_edges.get(b, [])]
+        ep = self.episode
+        own = [e for b in (ep.agents if shared else [agent]) for e in ep.states[b].failed_edges]
         own_arr = np.asarray(own, dtype=np.int64).reshape(-1, 2)
         return np.unique(np.concatenate([self.memory.removed(), own_arr]), axis=0)
 
-    def _parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
+    def parked_nodes(self, agent: str, share: float = 1.0) -> List[int]:
         """Buffer nodes within ``share * ban_radius`` predicted steps of the goals of the agents that have
         arrived (they are parked there, immovable): a replan for ``agent`` keeps clear of them."""
-        parked = [self._route_graph[b][:2] for b in self.agents
-                  if b != agent and b not in self._last_names and b in self._route_graph]
-        r = share * self.config.replanning.ban_radius
+        states = self.episode.states
+        parked = [(states[b].problem, states[b].goal_id) for b in self.episode.parked(agent)
+                  if states[b].problem is not None]
+        r = share * self.rules.ban_radius
         return [int(i) for problem, goal in parked for i in np.flatnonzero(nodes_near(problem, goal, r))]
 
     def _straight(self, problem: Any) -> Callable[[int, int], float]:
@@ -103,61 +102,58 @@ class StuckReplanning:
             d = float(problem.D[u, w])
             if d < d_max:
                 return d
-            return float(self._distance(problem.observations[[u]], problem.observations[[w]])[0])
+            return float(self.distance(problem.observations[[u]], problem.observations[[w]])[0])
 
         return straight
 
-    def _detach(self, agent: str, ob: np.ndarray, source: Optional[int], target: Optional[int]) -> None:
+    def _detach(self, state: AgentState, ob: np.ndarray, source: Optional[int], target: Optional[int]) -> None:
         """Detach the nodes beside the ends of the leg ``source -> target`` (buffer ids; ``None``: the
         agent's start or goal) where the critic now puts the target beyond two edges' reach."""
         p = self.planner
-        goal = self._goals[agent]
-        to = p.observations[[target]] if target is not None else goal[None]
-        if source is None and target is None or float(self._distance(ob[None], to)[0]) < 2 * p.graph.d_max:
+        to = p.observations[[target]] if target is not None else state.goal[None]
+        if source is None and target is None or float(self.distance(ob[None], to)[0]) < 2 * p.graph.d_max:
             return
-        assert self.config.replanning.detach_radius is not None  # checked by the caller
+        radius = self.rules.detach_radius
+        assert radius is not None  # checked by the caller
         if target is not None:  # no more from its start to the target or the nodes beside it
-            near = near_either_way(p.D, target, self.config.replanning.detach_radius)
-            self._detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [target])
+            state.detached.extend(np.flatnonzero(near_either_way(p.D, target, radius)).tolist() + [target])
         else:  # no more to its goal from the source or the nodes beside it
             assert source is not None
-            near = near_either_way(p.D, source, self.config.replanning.detach_radius)
-            self._goal_detached.setdefault(agent, []).extend(np.flatnonzero(near).tolist() + [source])
+            state.goal_detached.extend(np.flatnonzero(near_either_way(p.D, source, radius)).tolist() + [source])
 
-    def _replan_stuck(self, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
-        """The controller's callback for a stuck agent (see the module's docstring)."""
-        assert self.planner is not None and self.controller is not None
+    def stuck(self, controller: Any, agent: str, ob: np.ndarray, current: AgentPlan) -> AgentPlan:
+        """The controller's ``replan`` callback for a stuck agent (see the module's docstring)."""
         t1 = time.perf_counter()
         p = self.planner
+        state = self.episode.states[agent]
         n_nodes = len(p.observations)
-        k = self.controller.index[agent]
-        route = self.routes[agent]
-        leg = self.leg(agent)
+        k = controller.index[agent]
+        route = state.route
+        leg = state.leg(k)
         if leg is not None and leg.source is not None and leg.target is not None and leg.source != leg.target:
-            radius = self.config.replanning.ban_radius
-            self._failed_edges.setdefault(agent, []).extend(edges_near(p.D, leg.source, leg.target, radius))
+            state.failed_edges.extend(edges_near(p.D, leg.source, leg.target, self.rules.ban_radius))
             self.memory.record_failure(leg.source, leg.target)
-        if leg is not None and self.config.replanning.detach_radius is not None:
-            self._detach(agent, ob, leg.source, leg.target)
+        if leg is not None and self.rules.detach_radius is not None:
+            self._detach(state, ob, leg.source, leg.target)
         # the failed waypoint (on the last leg: the waypoint the goal was approached from) and the
         # nodes right by it
         f = route[k] if k < len(route) else (route[-1] if route else n_nodes)
         if f < n_nodes:
-            near = near_either_way(p.D, f, self.config.replanning.ban_radius)
-            self._failed[agent].append(f)
-            self._banned[agent].extend(np.flatnonzero(near).tolist() + [f])
+            near = near_either_way(p.D, f, self.rules.ban_radius)
+            state.failed.append(f)
+            state.banned.extend(np.flatnonzero(near).tolist() + [f])
         attempts, plans = self._attempts(agent)
         sub, banned = self._first_solved(agent, ob, attempts, narrow=(0, plans))
         if sub.solved:
-            self._banned[agent] = banned
-            new = self._install(agent, sub)
+            state.banned = banned
+            new = self._install(controller, agent, sub)
         else:  # no other way on the graph: give the waypoint up
             new = AgentPlan(current.waypoints[k + 1:], current.goal)
-            self.routes[agent] = route[k + 1:]
-            if agent in self._route_graph:  # the rest of the route, from here
-                self._route_graph[agent] = (*self._route_graph[agent][:2], self.controller.t)
-            self._seen_index[agent] = 0
-        self.replan_time += time.perf_counter() - t1
+            state.route = route[k + 1:]
+            if state.problem is not None:  # the rest of the route, from here
+                state.planned_at = controller.t
+            state.seen_index = 0
+        self.episode.replan_time += time.perf_counter() - t1
         return new
 
     def _attempts(self, agent: str, shared: bool = False) -> Tuple[List[Tuple[Any, ...]], int]:
@@ -167,15 +163,16 @@ class StuckReplanning:
         pass a parked agent, (nodes not linked to the start, nodes not linked to the goal))``, and how
         many of them leave out the detached links (the same number follow without them, then the
         attempts over more edges)."""
-        edges = self._exclude_edges(agent, shared)
-        parked = self._parked_nodes(agent)
+        state = self.episode.states[agent]
+        edges = self.exclude_edges(agent, shared)
+        parked = self.parked_nodes(agent)
         plans: List[Tuple[Any, ...]] = [
-            (self._banned[agent], self._banned[agent] + parked, edges, True),
-            (list(self._failed[agent]), self._failed[agent] + parked, edges, True), ([], parked, edges, True),
-            *[([], self._parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
+            (state.banned, state.banned + parked, edges, True),
+            (list(state.failed), state.failed + parked, edges, True), ([], parked, edges, True),
+            *[([], self.parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
             ([], parked, edges, False)]
         none: Tuple[List[int], List[int]] = ([], [])
-        detached = (sorted(set(self._detached.get(agent, []))), sorted(set(self._goal_detached.get(agent, []))))
+        detached = (sorted(set(state.detached)), sorted(set(state.goal_detached)))
         learned = edges if shared else self.memory.removed()
         attempts = [(*a, detached) for a in plans] + [(*a, none) for a in plans] + [
             ([], [], learned, False, detached), ([], [], learned, False, none), ([], [], None, False, none)]
@@ -186,18 +183,20 @@ class StuckReplanning:
         """The first solved plan of ``attempts`` (:meth:`_attempts`) for ``agent`` standing at ``ob``
         (else the last one tried), with the nodes it bans from now on. An attempt of index in
         ``narrow`` that is solved gives way to the next one where that is ``ban_detour`` shorter."""
-        p = self.planner
+        p, ep = self.planner, self.episode
+        goal = ep.states[agent].goal
         # where the agents that arrived stand (last seen), parked
-        at = [self._last_obs[b] for b in self.agents if b != agent and b not in self._last_names]
+        at = [o for o in (ep.states[b].last_obs for b in ep.parked(agent)) if o is not None]
 
         def attempt(exclude, exclude_edges, avoid, detach) -> Any:
-            return p.plan(ob[None], self._goals[agent][None], budget=self.config.budget, exclude=exclude,
+            return p.plan(ob[None], goal[None], budget=self.budget, exclude=exclude,
                           exclude_edges=exclude_edges, avoid=np.stack(at) if avoid and at else None,
                           detached=detach[0], goal_detached=detach[1])
 
         tried = []
         sub: Any = None
         banned: List[int] = []
+        detour = self.rules.ban_detour
         for j, (banned, exclude, exclude_edges, avoid, detach) in enumerate(attempts):
             key = (sorted(exclude), None if exclude_edges is None else exclude_edges.tolist(), avoid and bool(at),
                    detach)
@@ -208,58 +207,53 @@ class StuckReplanning:
             if sub.solved:
                 # around the neighbourhood, unless around the failed waypoints alone (the next attempt) is
                 # much shorter
-                if math.isfinite(self.config.replanning.ban_detour) and j in narrow:
+                if math.isfinite(detour) and j in narrow:
                     alt = attempt(*attempts[j + 1][1:])
-                    if alt.solved and alt.soc is not None and sub.soc is not None \
-                            and alt.soc + self.config.replanning.ban_detour < sub.soc:
+                    if alt.solved and alt.soc is not None and sub.soc is not None and alt.soc + detour < sub.soc:
                         sub, banned = alt, attempts[j + 1][0]
-                        self.narrow_replans += 1
+                        ep.narrow_replans += 1
                 break
         return sub, banned
 
-    def _install(self, agent: str, sub: Any) -> AgentPlan:
+    def _install(self, controller: Any, agent: str, sub: Any) -> AgentPlan:
         """The controller's plan for ``agent`` from the solved single-agent plan ``sub``; its route,
         heading past the waypoints it failed on twice that the route cannot avoid."""
         assert sub.problem is not None  # a solved plan keeps its problem graph
+        state = self.episode.states[agent]
         new = sub.agent_plans([agent], hold="waits")[agent]
-        keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, self._failed[agent],
+        keep = past_failed_waypoints(sub.nodes[0], sub.problem.goal_ids[0], sub.problem.D, state.failed,
                                      straight=self._straight(sub.problem))
-        self.routes[agent] = [sub.nodes[0][i] for i in keep]
         # kept as long as the route: its matrices as the buffer's and a border, not a copy of them
-        self._route_graph[agent] = (sub.problem.compact(self.planner.D, self.planner.C), sub.problem.goal_ids[0],
-                                    self.controller.t)
-        self._seen_index[agent] = 0
+        state.set_route([sub.nodes[0][i] for i in keep], sub.problem.compact(self.planner.D, self.planner.C),
+                        sub.problem.goal_ids[0], controller.t)
         return AgentPlan(new.waypoints[keep], new.goal, np.asarray(new.depart_times)[keep].tolist(), True)
 
-    def _rest_of_route(self, agent: str, k: int) -> float:
-        """The predicted length of ``agent``'s route from the start of its leg ``k`` to its goal."""
-        problem, goal, _ = self._route_graph[agent]
-        nodes = [*self.routes[agent][max(k - 1, 0):], goal]
-        return float(sum(problem.D[u, v] for u, v in zip(nodes[:-1], nodes[1:])))
-
-    def _repair_routes(self, current: Dict[str, np.ndarray]) -> None:
+    def repair_routes(self, controller: Any, current: Dict[str, np.ndarray]) -> None:
         """Plan anew for each agent in ``current`` that is about to set off along an edge another agent
         failed on in this episode (or right beside it: :func:`~agents.search.repair.edges_near`), or
         that the memory removed since its route was made; around those edges. Where no such route
         exists, or it is more than ``REPAIR_STRETCH`` times as long, it keeps its own."""
-        if not any(self._failed_edges.values()) and not len(self.memory.removed()):
+        ep = self.episode
+        if not any(ep.states[b].failed_edges for b in ep.agents) and not len(self.memory.removed()):
             return  # nothing failed yet: legs are checked from the first failure on
-        holding = self.controller.stats.holding
+        holding = controller.stats.holding
         fresh = []  # the agents on a leg not checked yet
         for agent in current:
-            if agent not in self._route_graph or holding.get(agent):
+            state = ep.states[agent]
+            if state.problem is None or holding.get(agent):
                 continue  # a held agent waits for others in the plan's order: checked when it sets off
-            plan, k = self.controller.plans[agent], self.controller.index[agent]
-            seen = self._leg_checked.get(agent)
+            plan, k = controller.plans[agent], controller.index[agent]
+            seen = state.leg_checked
             if seen is None or seen[0] is not plan or seen[1] != k:
-                self._leg_checked[agent] = (plan, k)
+                state.leg_checked = (plan, k)
                 fresh.append(agent)
         if not fresh:
             return
-        failed = {b: {(int(u), int(v)) for u, v in self._failed_edges.get(b, [])} for b in self.agents}
+        failed = {b: {(int(u), int(v)) for u, v in ep.states[b].failed_edges} for b in ep.agents}
         removed = {(int(u), int(v)) for u, v in self.memory.removed()}
         for agent in fresh:
-            leg = self.leg(agent)
+            state = ep.states[agent]
+            leg = state.leg(controller.index[agent])
             if leg is None or leg.source is None or leg.target is None:
                 continue
             edge = (leg.source, leg.target)
@@ -274,11 +268,11 @@ class StuckReplanning:
                         for a in self._attempts(agent, shared=True)[0][:-1]]
             sub, _ = self._first_solved(agent, current[agent], attempts)
             if sub is not None and sub.solved and sub.soc is not None \
-                    and sub.soc <= REPAIR_STRETCH * self._rest_of_route(agent, self.controller.index[agent]):
-                self.controller.set_plan(agent, self._install(agent, sub))
-                self._leg_checked[agent] = (self.controller.plans[agent], 0)
-                self.route_repairs += 1
-            self.replan_time += time.perf_counter() - t1
+                    and sub.soc <= REPAIR_STRETCH * state.rest_of_route(controller.index[agent]):
+                controller.set_plan(agent, self._install(controller, agent, sub))
+                state.leg_checked = (controller.plans[agent], 0)
+                ep.route_repairs += 1
+            ep.replan_time += time.perf_counter() - t1
 
 
-__all__ = ["StuckReplanning"]
+__all__ = ["REPAIR_STRETCH", "Replanner"]

@@ -8,6 +8,7 @@ from agents.search import SearchPolicy
 from agents.search.config import ControllerConfig
 from agents.search.controller import AgentPlan, WaypointController
 from agents.search.dependencies import plan_dependencies, proximity_relation
+from agents.search.episode import AgentState, Episode
 from agents.search.ordering import hold_cycle
 
 
@@ -470,9 +471,10 @@ def test_the_agents_that_must_pass_a_goal_are_read_off_their_remaining_routes(st
     D[3, 5] = D[5, 3] = 1.0  # node 3 is near a's goal
     problem = SimpleNamespace(D=D, n_buffer=5)
     policy.planner = policy.planner.with_options(proximity_radius=1.5)
-    policy.agents = ["a", "b", "c", "d"]
-    policy.routes = {"a": [0], "b": [0, 1, 2], "c": [0, 3], "d": [0, 4]}
-    policy._route_graph = {a: (problem, g, 0) for a, g in zip(policy.agents, [5, 6, 6, 6])}
+    routes = {"a": [0], "b": [0, 1, 2], "c": [0, 3], "d": [0, 4]}
+    policy.episode = Episode(agents=list(routes))
+    for a, g in zip(routes, [5, 6, 6, 6]):
+        policy.episode.states[a] = AgentState(goal=np.zeros(2), route=routes[a], problem=problem, goal_id=g)
     policy.controller = SimpleNamespace(index={"a": 1, "b": 0, "c": 1, "d": 0})
     # b must reach target 2 (the end of the leg that passes the goal); c must leave node 3 (its goal, 3)
     assert policy._goal_blockers("a") == [("b", 2), ("c", 2)]

@@ -268,9 +268,9 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
     both = {"agent_0": {"observation": START, "desired_goal": GOAL},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": parked_goal}}
     policy.predict(both)
-    assert policy._parked_nodes("agent_0") == []  # nobody has arrived yet
+    assert policy.replanner.parked_nodes("agent_0") == []  # nobody has arrived yet
     policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
-    near = policy._parked_nodes("agent_0")
+    near = policy.replanner.parked_nodes("agent_0")
     d = np.linalg.norm(planner.observations[near] - parked_goal, axis=1)
     assert len(near) and (d < policy.config.replanning.ban_radius).all()
     nodes = planner.observations
@@ -298,8 +298,8 @@ def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth
     policy.predict(both)
     policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
     nodes = planner.observations
-    assert DOOR in policy._parked_nodes("agent_0") and DOOR in policy._parked_nodes("agent_0", 0.85)
-    berth = policy._parked_nodes("agent_0", 0.7)
+    assert DOOR in policy.replanner.parked_nodes("agent_0") and DOOR in policy.replanner.parked_nodes("agent_0", 0.85)
+    berth = policy.replanner.parked_nodes("agent_0", 0.7)
     assert DOOR not in berth and len(berth)
     shortest = planner.plan(START[None], goal_0[None])
     assert set(shortest.nodes[0]) & set(berth)  # the shortest route passes right by the parked agent
@@ -375,7 +375,7 @@ def test_a_replan_does_not_pass_where_a_parked_agent_stands():
     assert 12 in policy.routes["agent_0"]  # straight on, by the node at (5, 5)
     stand_until_replans(policy, {"agent_0": both["agent_0"]}, 1)  # agent_1 arrived; agent_0 is stuck
     route = [int(i) for i in policy.routes["agent_0"] if i < len(nodes)]
-    assert policy._parked_nodes("agent_0") == [] and 12 not in route and len(route) >= 3
+    assert policy.replanner.parked_nodes("agent_0") == [] and 12 not in route and len(route) >= 3
     ways = np.concatenate([[start], nodes[route], [goal_0]]).astype(np.float64)
     along = np.linspace(0.0, 1.0, 21)[:, None]
     clear = [np.linalg.norm(a + along * (b - a) - stands, axis=1).min() for a, b in zip(ways[:-1], ways[1:])]
@@ -415,7 +415,7 @@ def test_a_stuck_agent_leaves_out_the_edges_beside_the_one_it_failed_on(world, p
     policy.predict({"observation": START, "desired_goal": GOAL})
     bad = first_edge_into(list(policy.routes["agent_0"]), DOOR)
     drive_until_stuck(policy, bad)
-    out = {tuple(e) for e in policy._exclude_edges("agent_0").tolist()}
+    out = {tuple(e) for e in policy.replanner.exclude_edges("agent_0").tolist()}
     D = planner.D
     beside = [(u, v) for u in range(len(D)) for v in range(len(D)) if u != v
               and min(D[u, bad[0]], D[bad[0], u]) < 2.5 and min(D[v, bad[1]], D[bad[1], v]) < 2.5]
@@ -461,7 +461,7 @@ def test_an_agent_that_lost_the_node_it_set_off_for_links_no_more_to_nodes_besid
         assert np.allclose(nodes[bad], (9.0, 7.0))  # the wormhole: a single step to the far place
         stand_until_replans(policy, {"observation": stuck_at, "desired_goal": goal}, 1)
         firsts[radius, where] = policy.routes["agent_0"][1]
-        detached[radius, where] = set(policy._detached["agent_0"])
+        detached[radius, where] = set(policy.episode.states["agent_0"].detached)
     beside = {i for i in range(len(nodes)) if min(D[i, bad], D[bad, i]) < 3.0} | {bad}
     assert firsts[None, "further"] in twins - {bad}  # the next node beside it
     assert detached[3.0, "further"] == beside and firsts[3.0, "further"] not in beside  # a way through the room
@@ -506,7 +506,7 @@ def test_an_agent_that_lost_its_goal_on_the_last_leg_links_no_more_nodes_beside_
         source = policy.leg("agent_0").source
         stand_until_replans(policy, {"observation": np.array([3.0, 5.0], np.float32), "desired_goal": goal}, 1)
         lasts[radius] = policy.routes["agent_0"][-1]
-        detached[radius] = set(policy._goal_detached["agent_0"])
+        detached[radius] = set(policy.episode.states["agent_0"].goal_detached)
     assert lasts[None] in corner - {source}  # the next corner node
     beside = {i for i in range(len(nodes)) if min(D[i, source], D[source, i]) < 3.0} | {source}
     assert detached[None] == set() and detached[3.0] == beside and corner <= beside

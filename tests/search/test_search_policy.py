@@ -255,8 +255,9 @@ def test_a_stuck_agent_whose_ban_cuts_every_route_retries_banning_only_the_faile
     route = list(policy.routes["agent_0"])
     assert len(route) >= 3
     policy.controller.index["agent_0"] = 1  # pretend it failed to reach its first waypoint
-    new = policy._replan_stuck("agent_0", obs["agent_0"]["observation"], policy.controller.plans["agent_0"])
-    assert policy._banned["agent_0"] == [route[1]]  # the neighbourhood ban (every node) was dropped
+    new = policy.replanner.stuck(policy.controller, "agent_0", obs["agent_0"]["observation"],
+                                 policy.controller.plans["agent_0"])
+    assert policy.episode.states["agent_0"].banned == [route[1]]  # the neighbourhood ban (every node) was dropped
     new_route = policy.routes["agent_0"]
     # a new plan (giving the waypoint up would keep the old route's tail, without the start flag)
     assert new.starts_at_first and route[1] not in new_route and len(new.waypoints) == len(new_route)
