@@ -144,7 +144,7 @@ class FailureTracker:
             parked_at: per agent, the step at which it parked (``-1``: never).
             geodesic: ``geodesic(a[2], b[2]) -> world units``, ground truth (``nan`` where undefined).
             planned: whether the search found a plan (``False``: every agent drove straight).
-            legs: per agent, its :class:`~agents.search.policy.Leg` at the end (or ``None``).
+            legs: per agent, its :class:`~agents.search.execution.episode.Leg` at the end (or ``None``).
             escapes: per agent, times it was found stuck on the way to its last target.
             node_positions: ground-truth positions of the buffer nodes (for the legs' true lengths).
         """

@@ -28,7 +28,7 @@ from .output import in_cell_order, parse_named_values
 
 #: the reasons, in the order they are tested
 CONTACT_REASONS = ("parked", "goals_close", "off_plan", "into_holding", "both_driving")
-#: controller activities (:data:`~agents.search.stats.ACTIVITIES`) off the plan
+#: controller activities (:data:`~agents.search.execution.stats.ACTIVITIES`) off the plan
 OFF_PLAN = frozenset({"escape", "fallback"})
 
 

@@ -3,7 +3,7 @@
 Table II compares the largest cumulative safety cost over a run's agents. An agent pays the cost
 on every step it spends near an obstacle, moving or not, so a run's largest cost is made by
 what its costliest agent did step by step. The controller records that
-(``ControllerStats.activity``, one of :data:`~agents.search.stats.ACTIVITIES`): driven by its
+(``ControllerStats.activity``, one of :data:`~agents.search.execution.stats.ACTIVITIES`): driven by its
 policy, by the fallback policy, escaping, or standing still for the plan's times, for an agent the
 plan sends first, for its parking, for another agent's goal, or to yield.
 
@@ -20,7 +20,7 @@ from typing import Any, Dict, Iterable, List, Sequence
 
 import numpy as np
 
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.stats import ACTIVITIES
 
 from .output import parse_named_values
 

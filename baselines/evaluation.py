@@ -28,11 +28,11 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from agents.search.config import GraphConfig, SolverConfig, preset_for
-from agents.search.graph import NodePairwise
+from agents.search.execution.repair import EdgeMemory
+from agents.search.graph.build import NodePairwise
+from agents.search.graph.sparsify import two_way_consistent
 from agents.search.models import default_second_opinion
 from agents.search.planner import BufferPlanner
-from agents.search.repair import EdgeMemory
-from agents.search.sparsify import two_way_consistent
 
 from .anatomy import failures_field
 from .contact_anatomy import contact_reasons_field
@@ -100,7 +100,7 @@ class EvaluationSetup:
               **kwargs) -> "EvaluationSetup":
         """Load the shipped checkpoints (unless ``models`` is given) and build the graph's nodes
         (``sparsify``: then keep those that two-way consistency merging at that many steps keeps,
-        :func:`~agents.search.sparsify.two_way_consistent`)."""
+        :func:`~agents.search.graph.sparsify.two_way_consistent`)."""
         import gymnasium as gym
 
         import safe_mapf_envs  # noqa: F401 (registers the ids)
@@ -260,7 +260,7 @@ def run_row(setup: EvaluationSetup, env, method: Method, problem: Problem, seed:
             memory: Optional[EdgeMemory] = None):
     """Run ``method`` on ``problem`` in ``env``; returns ``(row, execution)``. The run is seeded with
     ``seed + problem.index``, wherever it runs; a search method plans with ``memory`` (its graph's
-    :class:`~agents.search.repair.EdgeMemory`; default: a new one)."""
+    :class:`~agents.search.execution.repair.EdgeMemory`; default: a new one)."""
     ex = execute(env, method, setup.models, setup.planner, problem.starts, problem.goals, seed=seed + problem.index,
                  node_positions=setup.states, memory=memory)
     row = {
@@ -370,7 +370,7 @@ def learn_edge_memory(
 
     Every search method among ``methods`` runs ``n_problems`` problems per cell drawn with ``seed``
     (never ``test_seed``: the graph must not learn the test problems); each run starts from an
-    empty :class:`~agents.search.repair.EdgeMemory` and the runs' memories are added up, so the
+    empty :class:`~agents.search.execution.repair.EdgeMemory` and the runs' memories are added up, so the
     result does not depend on the order of the runs (serial or ``ray``). Returns one frozen memory
     per method name, with removal at ``limit`` failures.
     """

@@ -11,7 +11,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 import numpy as np
 
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.stats import ACTIVITIES
 
 from .anatomy import AgentFailure
 
@@ -33,7 +33,7 @@ class Execution:
     failures: List[AgentFailure] = field(default_factory=list)
     #: per agent, the step at which it arrived (``-1``: it did not)
     arrival: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    #: per agent and activity (:data:`~agents.search.stats.ACTIVITIES`), the cost it took
+    #: per agent and activity (:data:`~agents.search.execution.stats.ACTIVITIES`), the cost it took
     #: doing that (rows sum to ``cost``; empty where the runner does not record it)
     cost_split: np.ndarray = field(default_factory=lambda: np.zeros((0, len(ACTIVITIES))))
     #: per agent, whether it touched another agent during the run (empty where agents pass

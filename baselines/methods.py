@@ -27,11 +27,11 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from agents.search.config import SearchConfig, preset_for
+from agents.search.execution.repair import EdgeMemory
+from agents.search.execution.safety import SafetyLayer, team_positions
+from agents.search.execution.stats import ACTIVITIES
 from agents.search.planner import BufferPlanner
 from agents.search.policy import SearchPolicy
-from agents.search.repair import EdgeMemory
-from agents.search.safety import SafetyLayer, team_positions
-from agents.search.stats import ACTIVITIES
 
 from .anatomy import AgentFailure, FailureTracker
 from .contact_anatomy import contact_reason
@@ -53,8 +53,8 @@ class Method:
             rest) when the method runs.
         fallback: optional second checkpoint (``"unconstrained"``) that takes over an agent's
             leg once its own policy is stuck there (see
-            :class:`~agents.search.controller.WaypointController`).
-        safety: run with the :class:`~agents.search.safety.SafetyLayer` of the env between the
+            :class:`~agents.search.execution.controller.WaypointController`).
+        safety: run with the :class:`~agents.search.execution.safety.SafetyLayer` of the env between the
             controller and the env (the agents share their positions within the team).
     """
 
@@ -156,7 +156,7 @@ def execute(
     :mod:`baselines.anatomy`), read from ground truth after the run; ``node_positions`` (the
     buffer nodes' true positions, for evaluation only) adds the true length of the leg it was on.
 
-    ``memory`` is the search's :class:`~agents.search.repair.EdgeMemory` (default: a new one,
+    ``memory`` is the search's :class:`~agents.search.execution.repair.EdgeMemory` (default: a new one,
     returned in ``extra["memory"]`` with what this run taught it).
     """
     if method.policy in MARL_METHODS:

@@ -46,7 +46,7 @@ from typing import Dict, List
 import numpy as np
 import torch
 
-from agents.search.graph import WaypointGraph
+from agents.search.graph.build import WaypointGraph
 from baselines.evaluation import EvaluationSetup, make_problems
 
 SOLVER_OPTIONS = {

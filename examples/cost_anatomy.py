@@ -15,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.stats import ACTIVITIES
 from baselines.cost_anatomy import cost_anatomy, cost_anatomy_figure, cost_anatomy_table
 from baselines.output import read_rows
 

@@ -119,7 +119,7 @@ class NavigationEnvBase:
         threshold over the longest step (an action is clipped to ``[-1, 1]`` per axis, so a step
         moves at most ``sqrt(2) * action_scale``). No walls are looked at, so it costs a distance
         matrix; a planner reads its critics only where this bound is short
-        (:class:`~agents.search.graph.NodePairwise`'s ``bound``). Vector observations only."""
+        (:class:`~agents.search.graph.build.NodePairwise`'s ``bound``). Vector observations only."""
         if self.obs_type != "vector":
             raise ValueError(f"min_steps needs vector observations (positions); this env observes {self.obs_type}s")
         a = self.denormalize(np.asarray(obs_a).reshape(-1, 2))

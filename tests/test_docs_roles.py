@@ -113,8 +113,8 @@ def test_the_packages_hold_roles_and_the_pages_name_objects_of_them(loaded):
     identifiers = ext.api_identifiers()
     assert {identifier.split(".")[0] for identifier in identifiers} == set(PACKAGES)
     assert sum(len(ANY_ROLE.findall(text)) for _, text in _docstrings(plain)) > 500
-    assert "agents.search.safety.SafetyLayer.for_env" in anchors
-    assert "agents.search.safety" in anchors and "agents.search" not in anchors
+    assert "agents.search.execution.safety.SafetyLayer.for_env" in anchors
+    assert "agents.search.execution.safety" in anchors and "agents.search" not in anchors
 
 
 def test_no_docstring_keeps_a_role(loaded):
@@ -142,14 +142,14 @@ def test_every_link_goes_to_a_rendered_object_and_most_roles_link(loaded):
 
 @pytest.mark.parametrize("scope, text, expected", [
     # a full path; ``~`` shows the last component
-    ("agents.search.policy", ":class:`~agents.search.safety.SafetyLayer`",
-     "[`SafetyLayer`][agents.search.safety.SafetyLayer]"),
-    ("agents.search.policy", ":class:`agents.search.safety.SafetyLayer`",
-     "[`agents.search.safety.SafetyLayer`][agents.search.safety.SafetyLayer]"),
+    ("agents.search.policy", ":class:`~agents.search.execution.safety.SafetyLayer`",
+     "[`SafetyLayer`][agents.search.execution.safety.SafetyLayer]"),
+    ("agents.search.policy", ":class:`agents.search.execution.safety.SafetyLayer`",
+     "[`agents.search.execution.safety.SafetyLayer`][agents.search.execution.safety.SafetyLayer]"),
     # a short name: the module's import
-    ("agents.search.policy", ":class:`SafetyLayer`", "[`SafetyLayer`][agents.search.safety.SafetyLayer]"),
+    ("agents.search.policy", ":class:`SafetyLayer`", "[`SafetyLayer`][agents.search.execution.safety.SafetyLayer]"),
     ("agents.search.policy", ":meth:`SafetyLayer.for_env`",
-     "[`SafetyLayer.for_env()`][agents.search.safety.SafetyLayer.for_env]"),
+     "[`SafetyLayer.for_env()`][agents.search.execution.safety.SafetyLayer.for_env]"),
     # a method of the docstring's class
     ("agents.search.policy.SearchPolicy.predict", ":meth:`reset`",
      "[`reset()`][agents.search.policy.SearchPolicy.reset]"),

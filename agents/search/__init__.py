@@ -21,8 +21,10 @@ without a critic.
   (endpoint attachment, cost cut-off, local relaxation), used by the planner.
 """
 from .config import ControllerConfig, GraphConfig, ReplanConfig, SearchConfig, preset, preset_for
-from .controller import AgentPlan, WaypointController
-from .graph import ProblemGraph, WaypointGraph, build_problem_graph
+from .execution.controller import AgentPlan, WaypointController
+from .execution.safety import SafetyLayer, SafetyState, team_positions
+from .graph.build import ProblemGraph, WaypointGraph, build_problem_graph
+from .graph.single import Plan, risk_bounded_path, shortest_path
 from .mapf import (
     CBSResult,
     CBSSolver,
@@ -37,8 +39,6 @@ from .mapf import (
 from .models import distance_fn, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
 from .policy import SearchPolicy
-from .safety import SafetyLayer, SafetyState, team_positions
-from .single import Plan, risk_bounded_path, shortest_path
 from .waypoints import direct_plans
 
 __all__ = [

@@ -9,9 +9,9 @@ four parts and a budget:
   by the planner through :func:`~agents.search.mapf.registry.solve`;
 - :class:`ControllerConfig`: how agents follow their waypoints (advance, the plan's order or
   clock, yield, unstick, fallback legs); read by
-  :class:`~agents.search.controller.WaypointController`;
+  :class:`~agents.search.execution.controller.WaypointController`;
 - :class:`ReplanConfig`: what a stuck agent's new plan keeps clear of; read by
-  :mod:`agents.search.replanning`.
+  :mod:`agents.search.execution.replanning`.
 
 Every config validates itself on construction (a bad value raises ``ValueError`` naming the
 field) and is varied with :func:`dataclasses.replace`, or by option name with
@@ -90,7 +90,7 @@ class GraphConfig:
         time_model: ``"durative"`` (an edge takes ``ceil(D)`` steps) or ``"unit"`` (one step per
             edge, the paper's).
         relax_cost: where ``c_max`` leaves an agent no path, relax it around that agent's start and
-            goal until it has one (:func:`~agents.search.pruning.relax_cost_locally`); ``False``:
+            goal until it has one (:func:`~agents.search.graph.pruning.relax_cost_locally`); ``False``:
             the plan is ``"infeasible"``.
         budget_labels: label limit of the exact risk-bounded search of a plan's ``budget``; past it,
             a Lagrangian path within the budget.
@@ -98,12 +98,12 @@ class GraphConfig:
             shortest; ``None``: every edge under the cut-offs).
         cost_guard: where ``c_max`` leaves an agent only a detour predicted more than this many
             times as costly as its shortest route without the cut-off, that route is admitted too
-            (:func:`~agents.search.pruning.admit_cheaper_routes`; ``None``: off).
+            (:func:`~agents.search.graph.pruning.admit_cheaper_routes`; ``None``: off).
         detour: where ``c_max`` leaves an agent only a route more than this many times as long as
             its shortest route without the cut-off, and costlier at all, that route is admitted too
             (``None``: off).
         max_leg: no edge the planner's ``second_opinion`` reads beyond this many steps is planned,
-            nor admitted past the cost cut-off (:func:`~agents.search.pruning.long_legs`; needs a
+            nor admitted past the cost cut-off (:func:`~agents.search.graph.pruning.long_legs`; needs a
             second opinion; ``None`` or ``inf``: off).
     """
 
@@ -142,16 +142,16 @@ class GraphConfig:
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """How the agents follow their waypoints (:class:`~agents.search.controller.WaypointController`;
+    """How the agents follow their waypoints (:class:`~agents.search.execution.controller.WaypointController`;
     its module docstring describes each rule).
 
     Attributes:
         hold: how the agents keep to the plan: ``"order"`` (the plan's order at shared places,
-            however late an agent is; :mod:`agents.search.dependencies`), ``"waits"`` (an early agent
+            however late an agent is; :mod:`agents.search.execution.dependencies`), ``"waits"`` (an early agent
             waits for its planned departure time where the plan waits) or ``"all"`` (at every
             waypoint: on the clock).
         park_clearance: with ``hold="order"``, agents also park only after those their goal would
-            shut out (:func:`~agents.search.dependencies.shut_out`, predicted steps; ``None``: off).
+            shut out (:func:`~agents.search.execution.dependencies.shut_out`, predicted steps; ``None``: off).
         reach_threshold: a waypoint is reached at a predicted distance below this (steps).
         self_margin: also reached below the waypoint's predicted distance to itself plus this
             (``None``: the threshold only).
@@ -160,13 +160,13 @@ class ControllerConfig:
         settle_slack: see ``settle_patience``.
         advance_slack: a waypoint counts as reached only where the agent is also within this many
             steps of the waypoint's own predicted distance to the next target, or comes no closer
-            (:mod:`agents.search.advance`; ``None``: off).
+            (:mod:`agents.search.execution.advance`; ``None``: off).
         safety_radius: two moving agents closer than this (predicted steps) yield to each other
             (``None``: no yielding).
         push_margin: of two agents that yield, one held still that the other pushes away from its
             target goes first (predicted steps; ``None``: off).
         goal_clearance: an agent near its goal stands still while another free to leave stands
-            within this of that goal (:mod:`agents.search.clearance`; ``None``: off).
+            within this of that goal (:mod:`agents.search.execution.clearance`; ``None``: off).
         order_patience: steps an agent waits on one that makes no progress before it stops
             waiting on it (plan and goal order).
         stuck_window: steps over which an agent whose observation changed by less than
@@ -239,7 +239,7 @@ class ControllerConfig:
 
 @dataclass(frozen=True)
 class ReplanConfig:
-    """What a stuck agent's new plan keeps clear of (:mod:`agents.search.replanning`).
+    """What a stuck agent's new plan keeps clear of (:mod:`agents.search.execution.replanning`).
 
     Attributes:
         replan_when_stuck: an agent stuck ``skip_after`` times on the way to one waypoint gets a

@@ -88,7 +88,7 @@ def check_models(critic: Any, driver: Any) -> None:
 class SecondOpinion:
     """A planner's ``second_opinion``: ``model``'s predicted steps from ``obs_a[i]`` to ``obs_b[i]``
     (``model.distance``, its ensemble combined by ``aggregate``): a second reading of the edges
-    that nothing but the graph's own critic backs (:func:`~agents.search.pruning.trusted_edges`).
+    that nothing but the graph's own critic backs (:func:`~agents.search.graph.pruning.trusted_edges`).
     Picklable, so a planner that holds one can go to other processes."""
 
     def __init__(self, model: Any, aggregate: str = "max") -> None:

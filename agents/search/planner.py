@@ -1,7 +1,7 @@
 """Waypoints for many agents on the replay-buffer graph: CBS over learned distances.
 
-This is the glue between the critics, the :class:`~agents.search.graph.WaypointGraph`, CBS
-and the :class:`~agents.search.controller.WaypointController`:
+This is the glue between the critics, the :class:`~agents.search.graph.build.WaypointGraph`, CBS
+and the :class:`~agents.search.execution.controller.WaypointController`:
 
 1. the graph's nodes are observations with predicted distances ``D`` and costs ``C`` between every pair
    (:meth:`BufferPlanner.from_agent` computes them once);
@@ -43,8 +43,8 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from .config import OPTIONS, GraphConfig, SearchConfig, preset_for
-from .controller import AgentPlan
-from .graph import (
+from .execution.controller import AgentPlan
+from .graph.build import (
     NodePairwise,
     PairwiseFn,
     ProblemGraph,
@@ -54,6 +54,9 @@ from .graph import (
     check_endpoints,
     passing_edges,
 )
+from .graph.pruning import long_legs, route_from_predecessors
+from .graph.single import lagrangian_risk_path, risk_bounded_path, shortest_path
+from .graph.sparsify import two_way_consistent
 from .mapf import CBSResult, MapfResult, Proximity
 from .mapf.instance import MapfInstance
 from .mapf.registry import (
@@ -62,9 +65,6 @@ from .mapf.registry import (
     solve,
 )
 from .mapf.registry import SOLVERS as REGISTERED_SOLVERS
-from .pruning import long_legs, route_from_predecessors
-from .single import lagrangian_risk_path, risk_bounded_path, shortest_path
-from .sparsify import two_way_consistent
 from .waypoints import waypoints_from_paths
 
 #: The planner's multi-agent solvers (``"auto"`` chooses by the number of agents).
@@ -217,7 +217,7 @@ class BufferPlanner:
             problem gives the same plan on an idle and a loaded machine.
         second_opinion: ``(obs_a, obs_b) -> steps`` of a second critic, pair by pair (e.g. the driving agent's
             ``distance``), that vouches for the edges of a route the cost guard gives back where nothing else does
-            (:func:`~agents.search.pruning.trusted_edges`) and reads legs for ``graph.max_leg``; ``None``: none.
+            (:func:`~agents.search.graph.pruning.trusted_edges`) and reads legs for ``graph.max_leg``; ``None``: none.
             Not saved with the configs.
 
     :meth:`with_options` varies the configs by option name (``planner.with_options(c_max=0.25)``).
@@ -291,7 +291,7 @@ class BufferPlanner:
         ``bound(obs_a, obs_b)``: a lower bound of the distance in steps that needs no critic, such
         as the environment's ``min_steps`` (vector observations). Then only the pairs it puts
         below ``d_max`` are read by the critics, here and when starts and goals are attached (see
-        :class:`~agents.search.graph.NodePairwise`): on a large map, where most pairs are far
+        :class:`~agents.search.graph.build.NodePairwise`): on a large map, where most pairs are far
         apart, a graph of thousands of nodes takes seconds instead of minutes. ``D`` and ``C`` are
         then exact only below ``d_max`` (all the planner reads); a pair the bound rules out keeps
         the bound as its distance and :data:`UNREAD_COST` as its cost."""
@@ -315,7 +315,7 @@ class BufferPlanner:
 
     def sparsified(self, tau: float, order: Optional[np.ndarray] = None) -> Tuple["BufferPlanner", np.ndarray]:
         """A planner over the nodes kept by two-way consistency merging at ``tau`` steps
-        (:func:`~agents.search.sparsify.two_way_consistent`), and the kept node indices."""
+        (:func:`~agents.search.graph.sparsify.two_way_consistent`), and the kept node indices."""
         kept = two_way_consistent(self.D, tau, order)
         obs = self.observations[kept]
         pairwise = self.pairwise
@@ -350,7 +350,7 @@ class BufferPlanner:
                       goal_detached: Optional[Sequence[int]] = None) -> ProblemGraph:
         """The graph a problem is searched on: buffer nodes plus the agents' start and goal
         observations, pruned with this planner's cut-offs (see
-        :func:`~agents.search.graph.build_problem_graph`; edges that pass a place of ``avoid`` go
+        :func:`~agents.search.graph.build.build_problem_graph`; edges that pass a place of ``avoid`` go
         within the proximity radius). Two agents with the same goal are refused (``ValueError``)."""
         starts, goals = check_endpoints(self.observations, starts, goals)
         same = _same_rows(goals)

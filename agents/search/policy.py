@@ -3,7 +3,7 @@
 :class:`SearchPolicy` puts together what the paper's method is made of: a graph of buffer
 observations annotated by a critic (:class:`~agents.search.planner.BufferPlanner`), CBS, and a
 goal-conditioned policy that drives every agent from waypoint to waypoint
-(:class:`~agents.search.controller.WaypointController`). It is used like a Stable-Baselines3
+(:class:`~agents.search.execution.controller.WaypointController`). It is used like a Stable-Baselines3
 model::
 
     policy = SearchPolicy.from_models(critic, driver, c_max=0.25, safety=SafetyLayer.for_env(env))
@@ -20,7 +20,7 @@ goal or by an agent that was not there on the previous call; call :meth:`reset` 
 repeats the previous one's problem exactly.
 
 Only observations enter the planner and the controller; the optional
-:class:`~agents.search.safety.SafetyLayer` reads the team's shared positions. This module does not
+:class:`~agents.search.execution.safety.SafetyLayer` reads the team's shared positions. This module does not
 import torch; the models are only called through ``predict``, ``distance`` and ``pairwise``.
 """
 from __future__ import annotations
@@ -34,17 +34,17 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from ..run_folder import read_npz
-from .config import OPTIONS, ControllerConfig, ReplanConfig, SearchConfig, UnknownOptionError, preset_for
-from .controller import AgentPlan, WaypointController
-from .dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
-from .episode import AgentState, Episode, Leg
-from .graph import NodePairwise, check_graph_nodes, env_record
+from .config import OPTIONS, ControllerConfig, ReplanConfig, SearchConfig, preset_for
+from .execution.controller import AgentPlan, WaypointController
+from .execution.dependencies import goal_passers, plan_dependencies, proximity_relation, shut_out
+from .execution.episode import AgentState, Episode, Leg
+from .execution.repair import EdgeMemory
+from .execution.replanning import Replanner
+from .execution.safety import SafetyLayer, SafetyState
+from .execution.stats import ControllerStats
+from .graph.build import NodePairwise, check_graph_nodes, env_record
 from .models import buffer_observations, check_models, default_second_opinion, distance_fn, env_observations, policy_fn
 from .planner import BufferPlanner, MultiAgentPlan
-from .repair import EdgeMemory
-from .replanning import Replanner
-from .safety import SafetyLayer, SafetyState
-from .stats import ControllerStats
 from .waypoints import direct_plans
 
 #: :meth:`SearchPolicy.from_models`' and :meth:`SearchPolicy.load`'s marker of an argument not given
@@ -103,21 +103,21 @@ class SearchPolicy:
             controller hands the legs its driver reads beyond ``fallback_beyond`` to it at once and
             the planner's ``second_opinion`` is the driver's critic, the planner plans no such leg (its
             ``max_leg``, unless set; ``inf`` keeps them).
-        memory: the :class:`~agents.search.repair.EdgeMemory` of the graph (default: a new, empty
+        memory: the :class:`~agents.search.execution.repair.EdgeMemory` of the graph (default: a new, empty
             one): every plan leaves out the edges it removed, and it learns from every episode
             unless frozen (``memory.frozen = True``; an evaluation learns on validation problems
             and freezes it for the test problems). :meth:`save` keeps it with the graph.
-        safety: the :class:`~agents.search.safety.SafetyLayer` that filters every joint action so
+        safety: the :class:`~agents.search.execution.safety.SafetyLayer` that filters every joint action so
             that no two agents touch (e.g. ``SafetyLayer.for_env(env)``); it reads the team's shared
             positions, which :meth:`predict` then needs (``positions=team_positions(env)``).
             ``None``: actions go to the env as the controller makes them.
 
     How the agents keep to the plan is the controller config's ``hold``: ``"order"`` (the plan's
     order, not its clock: an agent sets off for a place the plan sends another agent through first
-    only once that one has got far enough, :mod:`agents.search.dependencies`, and parks at its goal
+    only once that one has got far enough, :mod:`agents.search.execution.dependencies`, and parks at its goal
     only once the agents whose routes still pass it have gone by,
-    :func:`~agents.search.dependencies.goal_passers`), ``"waits"`` or ``"all"`` (on the clock).
-    A stuck agent's replan (the ``replanning`` part) is described in :mod:`agents.search.replanning`.
+    :func:`~agents.search.execution.dependencies.goal_passers`), ``"waits"`` or ``"all"`` (on the clock).
+    A stuck agent's replan (the ``replanning`` part) is described in :mod:`agents.search.execution.replanning`.
     """
 
     def __init__(
@@ -171,7 +171,7 @@ class SearchPolicy:
             raise ValueError(f"the edge memory is of a graph of {memory.n_nodes} nodes, the planner's has "
                              f"{len(planner.observations)}")
         n_nodes = len(planner.observations) if planner is not None else 1
-        #: edges agents failed to traverse, learned over episodes (see :mod:`agents.search.repair`)
+        #: edges agents failed to traverse, learned over episodes (see :mod:`agents.search.execution.repair`)
         self.memory = memory if memory is not None else EdgeMemory(n_nodes)
         self.reset()
 
@@ -398,7 +398,7 @@ class SearchPolicy:
         policy was made with, if given.
 
         ``positions``: the team's shared positions, agent name -> ``(x, y)`` in world units for
-        every agent of the team, parked ones too (:func:`~agents.search.safety.team_positions`);
+        every agent of the team, parked ones too (:func:`~agents.search.execution.safety.team_positions`);
         required with a :attr:`safety` layer, which reads them to keep the agents apart, and
         read by nothing else (the planner and the controller see observations only).
         """
@@ -568,7 +568,7 @@ class SearchPolicy:
             self.memory.record_route(state.route, seen, now, n)
 
     def _goal_blockers(self, agent: str) -> List[Tuple[str, int]]:
-        """The controller's ``goal_order``: :func:`~agents.search.dependencies.goal_passers` of
+        """The controller's ``goal_order``: :func:`~agents.search.execution.dependencies.goal_passers` of
         ``agent`` on the routes as they are now, within the planner's proximity radius."""
         assert self.planner is not None and self.controller is not None
         ep = self.episode
@@ -585,4 +585,4 @@ class SearchPolicy:
         return out
 
 
-__all__ = ["Leg", "SearchPolicy", "UnknownOptionError"]
+__all__ = ["SearchPolicy"]

@@ -6,7 +6,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .controller import AgentPlan
+from .execution.controller import AgentPlan
 
 
 def direct_plans(goals: np.ndarray, names: Optional[Sequence[str]] = None) -> Dict[str, AgentPlan]:

@@ -205,8 +205,8 @@ METHOD_FLAGS: Tuple[MethodFlag, ...] = (
     MethodFlag("--safety", "safety", "all", dict(
         choices=("on", "off"), default=None,
         help="the safety layer between the controller and the env, which keeps agents from touching each other "
-             "with the team's shared positions (agents.search.safety; default on; 'off' shows what the agents "
-             "do without it)"),
+             "with the team's shared positions (agents.search.execution.safety; default on; 'off' shows what the "
+             "agents do without it)"),
         value=lambda v: v == "on",
         note="--safety off: no safety layer between the controller and the env"),
 )
@@ -468,7 +468,7 @@ def run(args: argparse.Namespace) -> int:
              "table": sel.table}, indent=1))
     memories = None
     if args.repair_problems:
-        from agents.search.repair import EdgeMemory
+        from agents.search.execution.repair import EdgeMemory
 
         names = [m.name for m in methods if m.search]
         paths = {name: out / f"edge_memory_{name}.npz" for name in names}

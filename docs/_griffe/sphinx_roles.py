@@ -1,13 +1,13 @@
 """Griffe extension of the docs build: the docstrings' Sphinx roles become cross-references.
 
-The docstrings name other objects with Sphinx roles (``:class:`~agents.search.safety.SafetyLayer```,
+The docstrings name other objects with Sphinx roles (``:class:`~agents.search.execution.safety.SafetyLayer```,
 ``:meth:`plan```, ``:func:``, ``:attr:``, ``:mod:``, ``:data:``, ...), which read well in
 ``help()``. mkdocstrings reads Markdown, where a role would stay literal text, so this extension
 rewrites every docstring of the documented packages, once they are loaded and before
 mkdocstrings parses them, into Markdown:
 
 - a role whose target the API reference documents becomes an autorefs cross-reference,
-  ``[`SafetyLayer`][agents.search.safety.SafetyLayer]``;
+  ``[`SafetyLayer`][agents.search.execution.safety.SafetyLayer]``;
 - any other role becomes code text (``SafetyLayer``): objects of other libraries (numpy, torch,
   gymnasium, stable-baselines3, ...) and objects of the packages the reference does not show.
 

@@ -173,7 +173,7 @@ def test_a_short_panorama_run_learns_distances():
 
 
 def test_pre_encoded_nodes_score_like_raw_ones_and_are_encoded_once(small):
-    from agents.search.graph import NodePairwise
+    from agents.search.graph.build import NodePairwise
 
     env = gym.make(ENV)
     rng = np.random.default_rng(3)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from agents.search.policy import Leg
+from agents.search.execution.episode import Leg
 from baselines.anatomy import (
     REASONS,
     FailureTracker,

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.stats import ACTIVITIES
 from baselines.cost_anatomy import (
     cost_anatomy,
     cost_anatomy_figure,

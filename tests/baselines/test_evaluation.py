@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import safe_mapf_envs
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.stats import ACTIVITIES
 from baselines.evaluation import (
     EvaluationSetup,
     c_max_grid,
@@ -328,7 +328,7 @@ def test_the_graph_learns_repairs_on_other_problems_and_keeps_them_frozen(setup,
     """learn_edge_memory runs the search methods on problems of another seed, adds up what each run's
     memory learned and freezes it; evaluate hands every test run a frozen copy, so no test run learns."""
     import baselines.evaluation as ev
-    from agents.search.repair import EdgeMemory
+    from agents.search.execution.repair import EdgeMemory
     from baselines.evaluation import learn_edge_memory
 
     with pytest.raises(ValueError, match="repair seed must differ from the test seed"):

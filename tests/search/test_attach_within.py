@@ -11,7 +11,7 @@ import torch as th
 
 import safe_mapf_envs  # noqa: F401
 from agents import load_pretrained
-from agents.search.graph import NodePairwise
+from agents.search.graph.build import NodePairwise
 from agents.search.mapf import validate
 from agents.search.planner import BufferPlanner
 from agents.self_sampling import observations_at

@@ -4,8 +4,8 @@ import pytest
 
 import safe_mapf_envs
 from agents.search.config import ControllerConfig
-from agents.search.controller import AgentPlan, WaypointController
-from agents.search.stats import ACTIVITIES
+from agents.search.execution.controller import AgentPlan, WaypointController
+from agents.search.execution.stats import ACTIVITIES
 
 SIZE = 55.0
 

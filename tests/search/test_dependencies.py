@@ -6,10 +6,10 @@ import pytest
 import safe_mapf_envs
 from agents.search import SearchPolicy
 from agents.search.config import ControllerConfig
-from agents.search.controller import AgentPlan, WaypointController
-from agents.search.dependencies import plan_dependencies, proximity_relation
-from agents.search.episode import AgentState, Episode
-from agents.search.ordering import hold_cycle
+from agents.search.execution.controller import AgentPlan, WaypointController
+from agents.search.execution.dependencies import plan_dependencies, proximity_relation
+from agents.search.execution.episode import AgentState, Episode
+from agents.search.execution.ordering import hold_cycle
 
 
 def test_the_agent_the_plan_sends_second_waits_for_the_first():

@@ -1,12 +1,12 @@
 """A cheap lower bound of the distance decides which pairs the critics read: the environment's
-``min_steps`` and :class:`~agents.search.graph.NodePairwise`'s ``bound``."""
+``min_steps`` and :class:`~agents.search.graph.build.NodePairwise`'s ``bound``."""
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import safe_mapf_envs  # noqa: F401
 from agents.algorithm import SafeGoalTD3
-from agents.search.graph import NodePairwise
+from agents.search.graph.build import NodePairwise
 
 SMALL = dict(net_arch=[16, 16], features_extractor_kwargs={"net_arch": [16]})
 

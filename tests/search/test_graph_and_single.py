@@ -4,8 +4,8 @@ import itertools
 import numpy as np
 import pytest
 
-from agents.search.graph import WaypointGraph
-from agents.search.single import lagrangian_risk_path, risk_bounded_path, shortest_path
+from agents.search.graph.build import WaypointGraph
+from agents.search.graph.single import lagrangian_risk_path, risk_bounded_path, shortest_path
 
 
 def stand_in(n=60, seed=0):

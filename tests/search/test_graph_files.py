@@ -7,8 +7,8 @@ import pytest
 from gymnasium import spaces
 
 from agents.search import SearchPolicy, WaypointGraph
-from agents.search.policy import UnknownOptionError
-from agents.search.repair import EdgeMemory
+from agents.search.config import UnknownOptionError
+from agents.search.execution.repair import EdgeMemory
 
 ENV = "SafeCentralObstacle-v0"
 BOX = spaces.Box(0.0, 1.0, (2,), np.float32)

@@ -273,7 +273,7 @@ def test_the_prioritized_budget_grows_with_the_graph(monkeypatch, nodes):
 
 
 def test_a_bordered_matrix_reads_as_the_dense_one():
-    from agents.search.graph import BorderedMatrix
+    from agents.search.graph.build import BorderedMatrix
 
     rng = np.random.default_rng(0)
     full = rng.random((9, 9))
@@ -294,7 +294,7 @@ def test_a_bordered_matrix_reads_as_the_dense_one():
 @pytest.mark.parametrize("d_max", [None, 4.0])
 def test_passing_edges_compare_only_the_nodes_near_a_place(d_max):
     # the pairs of nodes near each place give what every pair gives, on the edges (pairs closer than d_max)
-    from agents.search.graph import passing_edges
+    from agents.search.graph.build import passing_edges
 
     rng = np.random.default_rng(3)
     pts = rng.random((60, 2)) * 10

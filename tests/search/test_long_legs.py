@@ -6,8 +6,8 @@ import pytest
 import safe_mapf_envs  # noqa: F401  (registers the environments)
 from agents.search import BufferPlanner, SearchPolicy, build_problem_graph
 from agents.search.config import GraphConfig
+from agents.search.graph.pruning import admissible, long_legs
 from agents.search.models import SecondOpinion
-from agents.search.pruning import admissible, long_legs
 from tests.conftest import StraightLineAgent
 
 # a zigzag of nodes: hops of 2 along y = 0, hops of 1.41 up and down

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from agents.search.controller import AgentPlan
+from agents.search.execution.controller import AgentPlan
 from agents.search.mapf import Proximity, validate
 from agents.search.planner import BufferPlanner
 from agents.search.waypoints import direct_plans, waypoints_from_paths
@@ -332,7 +332,7 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
 
 
 def test_admit_cheaper_routes_on_a_hand_made_graph():
-    from agents.search.pruning import admit_cheaper_routes, shortest_routes
+    from agents.search.graph.pruning import admit_cheaper_routes, shortest_routes
 
     # buffer nodes 0, 1; start 2, goal 3. The cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3 by 3 hops);
     # the plain shortest route 2 -> 3 costs 2 by one hop
@@ -368,7 +368,7 @@ def test_admit_cheaper_routes_on_a_hand_made_graph():
 
 
 def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
-    from agents.search.pruning import admit_cheaper_routes
+    from agents.search.graph.pruning import admit_cheaper_routes
 
     # start 2, goal 3; the cut-off keeps 2 -> 0 -> 1 -> 3 (hops of 2 steps, cost 3); the direct hop
     # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps);
@@ -399,7 +399,7 @@ def test_a_second_critic_vouches_for_a_hop_nothing_else_backs():
     wormhole; a second critic that reads it short too gets it trusted, one that reads it long does not."""
     from scipy import sparse
 
-    from agents.search.pruning import admit_cheaper_routes, trusted_edges
+    from agents.search.graph.pruning import admit_cheaper_routes, trusted_edges
 
     # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3); the direct hop reads 2.6 steps (cost 1),
     # no chain backs it and the goal reads the start 8 steps away (more than 1.5 * d_max)
@@ -479,7 +479,7 @@ def test_the_planner_asks_its_second_opinion_on_observations():
 def test_a_hop_that_costs_more_than_its_steps_can_is_not_trusted():
     from scipy import sparse
 
-    from agents.search.pruning import admit_cheaper_routes, trusted_edges
+    from agents.search.graph.pruning import admit_cheaper_routes, trusted_edges
 
     # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 15), the direct hop reads 2 steps
     D = np.full((4, 4), 2.0)

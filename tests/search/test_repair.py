@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from agents.search import BufferPlanner, SearchPolicy, replanning
+from agents.search import BufferPlanner, SearchPolicy
 from agents.search.config import ControllerConfig, GraphConfig, ReplanConfig
-from agents.search.repair import EdgeMemory, edges_near
+from agents.search.execution import replanning
+from agents.search.execution.repair import EdgeMemory, edges_near
 
 
 class WallWorld:
@@ -202,7 +203,7 @@ def test_an_agent_stuck_twice_on_its_only_way_heads_past_that_waypoint():
 
 
 def test_past_failed_waypoints_skips_only_what_failed_twice_and_is_no_detour():
-    from agents.search.repair import past_failed_waypoints
+    from agents.search.execution.repair import past_failed_waypoints
 
     # nodes 0..4 on a line, 1 apart, and node 5 beside node 2 but behind a wall from node 0 (9 steps round it)
     x = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 2.0])
@@ -338,7 +339,7 @@ def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
 def test_cut_off_tells_a_cut_way_from_no_way():
     from scipy import sparse
 
-    from agents.search.dependencies import cut_off
+    from agents.search.execution.dependencies import cut_off
 
     # a path 0 - 1 - 2 - 3 and a detour 0 - 4 - 3 around node 1 and 2
     edges = [(0, 1), (1, 2), (2, 3), (0, 4), (4, 3)]
@@ -383,7 +384,7 @@ def test_a_replan_does_not_pass_where_a_parked_agent_stands():
 
 
 def test_passing_edges_are_those_that_go_through_a_place():
-    from agents.search.graph import passing_edges
+    from agents.search.graph.build import passing_edges
 
     world = OpenWorld()
     pts = np.array([(0.0, 0.0), (4.0, 0.0), (2.0, 3.0), (2.0, 0.5)], np.float32)
@@ -396,7 +397,7 @@ def test_passing_edges_are_those_that_go_through_a_place():
 
 
 def test_edges_near_a_failed_edge_are_those_between_the_two_places():
-    from agents.search.repair import edges_near
+    from agents.search.execution.repair import edges_near
 
     pts = np.array([(0.0, 0.0), (0.5, 0.0), (9.0, 0.0), (9.4, 0.0), (5.0, 0.0)])
     D = np.abs(pts[:, None, 0] - pts[None, :, 0])

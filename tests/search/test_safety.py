@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import safe_mapf_envs
 from agents.search import SearchPolicy
-from agents.search.safety import SafetyLayer, SafetyState, team_positions
+from agents.search.execution.safety import SafetyLayer, SafetyState, team_positions
 from baselines.methods import METHODS, execute
 
 LAYER = SafetyLayer(agent_radius=0.5, step_length=1.0)

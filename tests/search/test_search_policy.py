@@ -8,7 +8,7 @@ import pytest
 import safe_mapf_envs
 from agents.search import BufferPlanner, SearchPolicy, WaypointGraph, build_problem_graph
 from agents.search.config import ControllerConfig, GraphConfig
-from agents.search.graph import edge_mask
+from agents.search.graph.build import edge_mask
 
 ENV_ID = "SafeCentralObstacle-v0"
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from agents.search import BufferPlanner
-from agents.search.sparsify import cap_out_edges, two_way_consistent
+from agents.search.graph.sparsify import cap_out_edges, two_way_consistent
 
 
 def line_world(points):

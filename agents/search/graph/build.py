@@ -20,7 +20,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 import numpy as np
 from scipy import sparse
 
-from ..run_folder import read_npz
+from ...run_folder import read_npz
 from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, long_legs, relax_cost_locally
 from .sparsify import cap_out_edges
 
@@ -704,7 +704,7 @@ def build_problem_graph(
     whose route the cut-off made more than ``detour`` times as long and costlier at all.
     ``second_opinion(obs_a, obs_b)``: a second critic's predicted steps from ``obs_a[i]`` to ``obs_b[i]``,
     which vouches for such a route's edges that nothing else backs
-    (:func:`~agents.search.pruning.trusted_edges`).
+    (:func:`~agents.search.graph.pruning.trusted_edges`).
     ``detached`` lists buffer nodes no start may link to directly (an agent that failed to reach them
     from where it stood: the critic took that place for one near them), ``goal_detached`` buffer nodes
     that may not link to a goal directly (an agent failed to reach its goal from them); routes may
@@ -712,7 +712,7 @@ def build_problem_graph(
     where it was computed before (it is the expensive step: the critic scores every new pair), and
     ``passing`` what :func:`passing_edges` returns for them and ``avoid``. ``max_leg``: no edge that
     ``second_opinion`` reads beyond this many steps is admitted; ``long_edges``: what
-    :func:`~agents.search.pruning.long_legs` returns for these endpoints and ``max_leg``, where
+    :func:`~agents.search.graph.pruning.long_legs` returns for these endpoints and ``max_leg``, where
     computed before (it reads every edge with the second critic).
     """
     n = len(observations)

@@ -9,12 +9,12 @@ current waypoint's observation. Rules, all from observations only:
   learned distance is not zero there) plus ``self_margin`` is larger: an agent standing on
   such a waypoint would otherwise never see it reached; with ``advance_slack``, only where it is
   about as near its next target as the waypoint is, or no longer closes in on the waypoint
-  (:mod:`agents.search.advance`);
+  (:mod:`agents.search.execution.advance`);
 - **plan time**: an agent does not leave waypoint ``k`` before the plan's departure time from
   it (so CBS's waits happen in the environment, too);
 - **plan order** (optional, instead of plan time): an agent does not set off for a target before
   the agents the plan sends through that place earlier have got far enough along their own
-  routes (:mod:`agents.search.dependencies`), however late they are; an agent waits on another
+  routes (:mod:`agents.search.execution.dependencies`), however late they are; an agent waits on another
   for at most ``order_patience`` steps in which that one makes no progress, and never on one that
   has replanned;
 - **goal order** (optional): an agent does not set off for its goal while ``goal_order`` names
@@ -22,8 +22,8 @@ current waypoint's observation. Rules, all from observations only:
   one that parks in a doorway before another has gone through shuts that one out for good);
   same patience as the plan order. Where the two orders meet (the plan sends the parking agent
   first, the goal order holds it for the other), the other agent goes first, and so where the
-  holds of several agents close a cycle (:mod:`agents.search.ordering`);
-- **clear goal** (optional, ``goal_clearance``; :mod:`agents.search.clearance`): an agent near
+  holds of several agents close a cycle (:mod:`agents.search.execution.ordering`);
+- **clear goal** (optional, ``goal_clearance``; :mod:`agents.search.execution.clearance`): an agent near
   its goal stands still while another agent free to leave stands by that goal (parked, it would
   shut that one in); the one it holds for no longer waits for it by the plan's or goal order;
 - **yield**: when another agent is within ``safety_radius`` (under ``proximity``), the agent
@@ -61,9 +61,9 @@ from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..config import ControllerConfig
 from .advance import AdvanceRules
 from .clearance import GoalClearance, pair_proximity
-from .config import ControllerConfig
 from .ordering import OrderRules
 from .stats import ControllerStats
 
@@ -85,7 +85,7 @@ class AgentPlan:
             critic. A learned distance from an observation to itself is not zero (on the
             apartments it is 1.2-3 steps, above a reach threshold of 2), and an agent sent
             towards its own position moves away from it and may never come back.
-        after: plan-order dependencies (see :mod:`agents.search.dependencies`).
+        after: plan-order dependencies (see :mod:`agents.search.execution.dependencies`).
     """
 
     waypoints: np.ndarray
@@ -366,7 +366,8 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         return False
 
     def _activity(self, agent: str, reason: Optional[str], escaping: bool) -> str:
-        """One of :data:`~agents.search.stats.ACTIVITIES`: what ``agent`` does on this step (held for ``reason``)."""
+        """One of :data:`~agents.search.execution.stats.ACTIVITIES`: what ``agent`` does on this step (held
+        for ``reason``)."""
         if reason is None:
             if escaping:
                 return "escape"

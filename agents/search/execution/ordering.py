@@ -1,16 +1,16 @@
-"""Whom an agent of :class:`~agents.search.controller.WaypointController` waits for before it sets
+"""Whom an agent of :class:`~agents.search.execution.controller.WaypointController` waits for before it sets
 off for its next target (the controller's *plan order* and *goal order* rules). A mixin: the
 controller keeps the state these methods read and write.
 
 - **Plan order**: the agents the plan sends through the target's place earlier must first have got
-  far enough along their own routes (:mod:`agents.search.dependencies`).
+  far enough along their own routes (:mod:`agents.search.execution.dependencies`).
 - **Goal order** (``goal_order``): before the leg to its goal, the agents that still have to pass
   the goal (parked, the agent would be an immovable obstacle there).
 - **Patience**: an agent waits on another for at most ``order_patience`` steps in which that one
   reaches no new target.
 - **Waits that close a cycle** are broken at once, not after the patience. The plan's own order has
   no cycle, but an agent that falls behind can meet others in another order, and the goal order
-  and the clear-goal rule (:mod:`agents.search.clearance`) add holds the plan does not know. Where
+  and the clear-goal rule (:mod:`agents.search.execution.clearance`) add holds the plan does not know. Where
   the holds of the last step lead from the agent an agent waits on back to the agent itself, the
   agent stops waiting when the hold that closes the cycle is one for its sake: the agent before it
   in the cycle holds its parking for it (goal order) or stands still to clear its goal for it;
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-from .config import ControllerConfig
+from ..config import ControllerConfig
 
 
 def hold_cycle(agent: str, first: str, holds: Callable[[str], Optional[str]], limit: int) -> Optional[List[str]]:

@@ -1,6 +1,6 @@
 """What the waypoint controller counts and records while it executes plans.
 
-:class:`ControllerStats` holds the counters of :class:`~agents.search.controller.WaypointController`
+:class:`ControllerStats` holds the counters of :class:`~agents.search.execution.controller.WaypointController`
 and, per agent, why it stood still and what it did on the last step (:data:`ACTIVITIES`).
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ ACTIVITIES = ("drive", "fallback", "escape", "wait", "order", "park", "clear", "
 
 @dataclass
 class ControllerStats:
-    """Counters of a :class:`~agents.search.controller.WaypointController` (each counts events
+    """Counters of a :class:`~agents.search.execution.controller.WaypointController` (each counts events
     since it was made), and per agent what it did on the last step."""
 
     steps: int = 0
@@ -41,7 +41,7 @@ class ControllerStats:
     handovers: int = 0
     #: times an agent came no closer to its target for ``progress_patience`` steps
     stalls: int = 0
-    #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.ordering`; not
+    #: waits given up at once because the agents' holds closed a cycle (:mod:`agents.search.execution.ordering`; not
     #: counted: the two-agent case where the plan order meets a parking or clearing hold)
     cycles: int = 0
     waypoint_index: Dict[str, int] = field(default_factory=dict)

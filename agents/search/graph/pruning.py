@@ -1,5 +1,5 @@
 """What the cost cut-off of a problem graph may give back (the layout of
-:class:`~agents.search.graph.ProblemGraph`: buffer nodes, then the agents' starts, then their goals).
+:class:`~agents.search.graph.build.ProblemGraph`: buffer nodes, then the agents' starts, then their goals).
 
 - :func:`relax_cost_locally`: an agent that the cut-off leaves without a path gets the edges
   around its start and goal back, at a doubling cut-off, until it has one;

@@ -19,7 +19,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ..run_folder import read_npz
+from ...run_folder import read_npz
 
 Edge = Tuple[int, int]
 

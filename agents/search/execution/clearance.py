@@ -1,4 +1,4 @@
-"""The *clear goal* rules of :class:`~agents.search.controller.WaypointController` (its
+"""The *clear goal* rules of :class:`~agents.search.execution.controller.WaypointController` (its
 ``goal_clearance``, in predicted steps). A mixin: the controller keeps the state these methods
 read and write.
 
@@ -26,7 +26,7 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 import numpy as np
 
-from .config import ControllerConfig
+from ..config import ControllerConfig
 
 
 def pair_proximity(distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
@@ -40,7 +40,7 @@ def pair_proximity(distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
 
 
 class GoalClearance:
-    """The controller's *clear goal* rules (see :class:`~agents.search.controller.WaypointController`)."""
+    """The controller's *clear goal* rules (see :class:`~agents.search.execution.controller.WaypointController`)."""
 
     config: ControllerConfig
     t: int

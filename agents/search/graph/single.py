@@ -1,4 +1,4 @@
-"""Single-agent search on a :class:`~agents.search.graph.WaypointGraph`.
+"""Single-agent search on a :class:`~agents.search.graph.build.WaypointGraph`.
 
 Three objectives:
 
@@ -19,7 +19,7 @@ from typing import List
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
-from .graph import WaypointGraph
+from .build import WaypointGraph
 from .pruning import route_from_predecessors
 
 

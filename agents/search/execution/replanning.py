@@ -1,9 +1,9 @@
 """What :class:`~agents.search.policy.SearchPolicy` does for an agent its controller finds stuck
 (``replan_when_stuck``): :class:`Replanner`, which reads and writes the episode's
-:class:`~agents.search.episode.AgentState` records and the edge memory.
+:class:`~agents.search.execution.episode.AgentState` records and the edge memory.
 
 - The edge the agent was on is recorded: in its failed edges for this episode, with the edges
-  between the nodes right by its two ends (:func:`~agents.search.repair.edges_near`: a critic that
+  between the nodes right by its two ends (:func:`~agents.search.execution.repair.edges_near`: a critic that
   took two far places for near ones misjudges their neighbours too), and in the ``memory``.
 - The node it failed to reach and the nodes within ``ban_radius`` of it (either way) are banned.
 - Where the critic now puts the leg's target beyond two edges' reach (``2 * d_max``), though the
@@ -25,7 +25,7 @@
   where its route said when it failed, or another agent was in the way). Only if none is solved
   it gives the waypoint up.
 - A waypoint it failed on twice that the new route cannot avoid, it heads past
-  (:func:`~agents.search.repair.past_failed_waypoints`, with the critic's distance where the
+  (:func:`~agents.search.execution.repair.past_failed_waypoints`, with the critic's distance where the
   problem graph holds only a bound: beyond ``d_max``).
 
 With ``repair_routes``, what one agent learns the others use at once: an agent about to set off
@@ -45,7 +45,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .config import SearchConfig
+from ..config import SearchConfig
 from .controller import AgentPlan
 from .dependencies import nodes_near
 from .episode import AgentState, Episode
@@ -63,9 +63,9 @@ class Replanner:
         planner: the policy's :class:`~agents.search.planner.BufferPlanner`.
         config: the policy's :class:`~agents.search.config.SearchConfig` (its ``replanning`` part and
             ``budget``).
-        memory: the graph's :class:`~agents.search.repair.EdgeMemory` (failures are recorded in it).
+        memory: the graph's :class:`~agents.search.execution.repair.EdgeMemory` (failures are recorded in it).
         distance: ``distance(obs[B], goal[B]) -> [B]`` of the critic that judges waypoints.
-        episode: the policy's current :class:`~agents.search.episode.Episode`.
+        episode: the policy's current :class:`~agents.search.execution.episode.Episode`.
     """
 
     def __init__(self, planner: Any, config: SearchConfig, memory: Any,
@@ -230,7 +230,7 @@ class Replanner:
 
     def repair_routes(self, controller: Any, current: Dict[str, np.ndarray]) -> None:
         """Plan anew for each agent in ``current`` that is about to set off along an edge another agent
-        failed on in this episode (or right beside it: :func:`~agents.search.repair.edges_near`), or
+        failed on in this episode (or right beside it: :func:`~agents.search.execution.repair.edges_near`), or
         that the memory removed since its route was made; around those edges. Where no such route
         exists, or it is more than ``REPAIR_STRETCH`` times as long, it keeps its own."""
         ep = self.episode

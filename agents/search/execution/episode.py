@@ -4,7 +4,7 @@
 order, an :class:`AgentState` per agent (its goal, its last observation, its route and the
 problem graph the route lives on, and what its replans keep clear of), the agents seen on the
 last call, and the episode's counters. The policy, its replanning
-(:class:`~agents.search.replanning.Replanner`) and its goal order read and write it; nothing of it
+(:class:`~agents.search.execution.replanning.Replanner`) and its goal order read and write it; nothing of it
 outlives the episode.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ from typing import Dict, List, Optional, Set, Tuple
 
 import numpy as np
 
+from ..graph.build import ProblemGraph
 from .controller import AgentPlan
-from .graph import ProblemGraph
 from .safety import SafetyState
 
 
@@ -122,7 +122,7 @@ class Episode:
     narrow_replans: int = 0
     route_repairs: int = 0
     safety: SafetyState = field(default_factory=SafetyState)
-    #: :func:`~agents.search.dependencies.shut_out`'s cache of cuts found
+    #: :func:`~agents.search.execution.dependencies.shut_out`'s cache of cuts found
     cut_cache: Dict[Tuple[int, ...], bool] = field(default_factory=dict)
 
     def parked(self, agent: str) -> List[str]:

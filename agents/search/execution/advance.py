@@ -1,4 +1,4 @@
-"""When an agent of :class:`~agents.search.controller.WaypointController` counts its waypoint
+"""When an agent of :class:`~agents.search.execution.controller.WaypointController` counts its waypoint
 as reached (the controller's *advance* rule). A mixin: the controller keeps the state these
 methods read and write.
 
@@ -37,7 +37,7 @@ from typing import Any, Callable, Dict, Tuple
 
 import numpy as np
 
-from .config import ControllerConfig
+from ..config import ControllerConfig
 
 
 class AdvanceRules:
