@@ -371,117 +371,33 @@ def run(args: argparse.Namespace) -> int:
     largest finite shortest-path distance on the buffer graph divided by 8 / 4 / 2), then write
     per-run rows (runs.csv), the aggregate (table.csv, table.json), a Markdown table laid out like the
     paper's Table I (table.md, printed) and the trajectory figure (figure.png)."""
-
     import torch
 
-    from agents.run_folder import atomic_output, write_atomic
     from baselines.anatomy import failure_records
-    from baselines.cli import env_for_map, show_progress
-    from baselines.evaluation import (
-        REPAIR_SEED_OFFSET,
-        VALIDATION_SEED_OFFSET,
-        EvaluationSetup,
-        evaluate,
-        learn_edge_memory,
-        markdown_table,
-        select_c_max,
-        write_csv,
-    )
+    from baselines.cli import show_progress
+    from baselines.evaluation import EvaluationSetup, evaluate
     from baselines.methods import DEFAULT_METHODS, get_methods
-    from baselines.metrics import aggregate
 
-    args.env = env_for_map(args.env, args.map_file)  # a map of one's own: its id, registered
-    repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
-    if args.repair_problems and repair_seed == args.seed:
-        raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "
-                         "problems")
-    if args.max_leg is not None and not args.max_leg > 0:  # NaN too
-        raise ValueError(f"--max-leg must be > 0 steps, got {args.max_leg}")
-    if args.c_max == "auto" and args.validation_seed == args.seed:
-        raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
-                         "test problems")
-    import gymnasium as gym
-
-    import safe_mapf_envs  # noqa: F401  (registers the ids)
-
-    if args.env.split(":")[-1] not in gym.registry:
-        known = sorted(k for k in gym.registry if k.startswith("Safe"))
-        raise ValueError(f"unknown env id {args.env!r}; registered: {', '.join(known)}")
-    if args.ray is not None:
-        from baselines.distributed import require_ray
-
-        require_ray()  # before any work
+    repair_seed = _check_flags(args)
     torch.set_num_threads(1)
     if args.protocol == "paper":
         return _run_paper(args)
-    if args.c_max == "auto" and args.c_max_from is None and not any(
-            m.search and math.isfinite(m.c_max) for m in get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))):
-        raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
-    chosen, validation_seed = None, None
-    if args.c_max_from is not None:
-        if args.c_max is not None:
-            raise ValueError("give --c-max or --c-max-from, not both")
-        meta = _read_c_max_file(args.c_max_from, "--c-max-from")
-        if meta.get("test_seed") is not None and meta.get("validation_seed") == args.seed:
-            raise ValueError(f"{args.c_max_from} chose c_max on seed {args.seed}, the test seed of this run")
-        chosen = {int(k): float(v) for k, v in meta["chosen"].items()}
-        missing = sorted(set(args.agents) - set(chosen))
-        if missing:
-            raise ValueError(f"{args.c_max_from} has no c_max for agent counts {missing} (it has {sorted(chosen)})")
-        chosen = {k: chosen[k] for k in args.agents}
-        validation_seed = meta.get("validation_seed")
+    chosen, validation_seed = _c_max_from_file(args)
     out = _check_before_work(args)
     print(_small_run_note(args), end="", file=sys.stderr, flush=True)
     methods = get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))
     marl = _marl_models(args, [m.name for m in methods])  # before any work: a missing policy fails here
-    methods = apply_method_flags(methods, args)
+    methods = apply_method_flags(methods, args)  # the flags' changes to the methods' configs
     t0 = time.perf_counter()
-    from agents import load_pretrained
-    from agents.search.models import default_second_opinion
-
-    models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k))
-              for k in ("unconstrained", "constrained")}
-    models.update(marl)
-    if args.max_leg is not None and math.isfinite(args.max_leg) and default_second_opinion(
-            models["unconstrained"], models["constrained"]) is None:
-        raise ValueError("--max-leg needs a constrained agent with a distance critic of its own to read the legs with")
+    models = _load_models(args, marl)
     kept, writer, failures, failure_writer = _open_rows(args, out)  # every check passed: the folder is ours
     assert failure_writer is not None
-    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models,
-                                  sparsify=args.sparsify)
+    setup = EvaluationSetup.build(args.env, n_nodes=args.nodes, seed=args.seed, models=models, sparsify=args.sparsify)
     progress = show_progress(args.no_progress or args.json)
-    if chosen is None and args.c_max == "auto" and args.resume and (out / "c_max.json").exists():
-        meta = _read_c_max_file(out / "c_max.json", "--resume: the folder's")  # chosen before the interruption
-        chosen = {k: float(meta["chosen"][str(k)]) for k in args.agents}
-        validation_seed = meta.get("validation_seed")
     if chosen is None and args.c_max == "auto":
-        constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]  # not empty: checked above
-        vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
-        sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
-                           n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
-                           max_cycles=args.max_cycles, progress=progress, ray=args.ray)
-        chosen, validation_seed = sel.chosen, sel.seed
-        write_csv(sel.rows, out / "validation_runs.csv")
-        write_atomic(out / "c_max.json", json.dumps(
-            {"chosen": {str(k): v for k, v in chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
-             "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
-             "table": sel.table}, indent=1))
-    memories = None
-    if args.repair_problems:
-        from agents.search.execution.repair import EdgeMemory
-
-        names = [m.name for m in methods if m.search]
-        paths = {name: out / f"edge_memory_{name}.npz" for name in names}
-        if args.resume and all(p.exists() for p in paths.values()):  # learned before the interruption
-            memories = {name: EdgeMemory.load(p) for name, p in paths.items()}
-        else:
-            memories = learn_edge_memory(setup, methods, args.agents, args.difficulty, args.repair_problems,
-                                         seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
-                                         progress=progress, policy_agents=args.policies_at,
-                                         c_max_by_agents=chosen, ray=args.ray)
-            for name, memory in memories.items():
-                with atomic_output(out / f"edge_memory_{name}.npz") as tmp:
-                    memory.save(tmp)
+        chosen, validation_seed = _choose_c_max(args, setup, methods, out, progress)
+    memories = _edge_memories(args, setup, methods, out, progress, chosen, repair_seed) if args.repair_problems \
+        else None
 
     def keep(row, _problem, ex) -> None:
         records = failure_records(row, ex.failures)
@@ -494,55 +410,184 @@ def run(args: argparse.Namespace) -> int:
         rows = evaluate(setup, methods, args.agents, args.difficulty, args.problems, seed=args.seed,
                         max_cycles=args.max_cycles, progress=progress, policy_agents=args.policies_at,
                         c_max_by_agents=chosen, ray=args.ray, memories=memories, on_run=keep, kept=kept)
+    notes = _notes(args, chosen, validation_seed, memories, repair_seed)
+    agg, text, anatomy = _write_tables(args, out, rows, failures, [m.name for m in methods], notes,
+                                       wall=time.perf_counter() - t0)
+    _draw(args, out, setup, methods, chosen)
+    if args.json:
+        print(json.dumps(agg))
+    else:
+        print(text)
+        print("\nWhy agents did not arrive (failed agents per reason):\n\n" + anatomy)
+        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}, "
+              f"{out / 'failures.csv'}, {out / 'anatomy.md'}, {out / 'anatomy.png'}"
+              + (f", {out / 'figure.png'}" if args.figure else "") + (f", {out / 'run.gif'}" if args.video else ""))
+    return 0
+
+
+def _check_flags(args: argparse.Namespace) -> int:
+    """Checks of the flags among themselves and of the env id, before anything is loaded; returns the
+    seed of the repair problems. ``--map`` registers the map's env and sets ``args.env`` to it."""
+    import gymnasium as gym
+
+    import safe_mapf_envs  # noqa: F401  (registers the ids)
+    from baselines.cli import env_for_map
+    from baselines.evaluation import REPAIR_SEED_OFFSET
+    from baselines.methods import DEFAULT_METHODS, get_methods
+
+    args.env = env_for_map(args.env, args.map_file)  # a map of one's own: its id, registered
+    repair_seed = args.seed + REPAIR_SEED_OFFSET if args.repair_seed is None else args.repair_seed
+    if args.repair_problems and repair_seed == args.seed:
+        raise ValueError(f"--repair-seed must differ from --seed ({args.seed}): the graph never learns on the test "
+                         "problems")
+    if args.max_leg is not None and not args.max_leg > 0:  # NaN too
+        raise ValueError(f"--max-leg must be > 0 steps, got {args.max_leg}")
+    if args.c_max == "auto" and args.validation_seed == args.seed:
+        raise ValueError(f"--validation-seed must differ from --seed ({args.seed}): c_max is never chosen on the "
+                         "test problems")
+    if args.env.split(":")[-1] not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("Safe"))
+        raise ValueError(f"unknown env id {args.env!r}; registered: {', '.join(known)}")
+    if args.ray is not None:
+        from baselines.distributed import require_ray
+
+        require_ray()  # before any work
+    if args.protocol == "strict" and args.c_max == "auto" and args.c_max_from is None and not any(
+            m.search and math.isfinite(m.c_max) for m in get_methods(dict.fromkeys(args.methods or DEFAULT_METHODS))):
+        raise ValueError("--c-max auto needs a constrained search among --methods (ours or ours_budget)")
+    return repair_seed
+
+
+def _c_max_from_file(args: argparse.Namespace):
+    """The per-agent-count c_max of ``--c-max-from`` and the seed it was chosen on (``(None, None)``
+    without it); checked against this run's seed and agent counts."""
+    if args.c_max_from is None:
+        return None, None
+    if args.c_max is not None:
+        raise ValueError("give --c-max or --c-max-from, not both")
+    meta = _read_c_max_file(args.c_max_from, "--c-max-from")
+    if meta.get("test_seed") is not None and meta.get("validation_seed") == args.seed:
+        raise ValueError(f"{args.c_max_from} chose c_max on seed {args.seed}, the test seed of this run")
+    chosen = {int(k): float(v) for k, v in meta["chosen"].items()}
+    missing = sorted(set(args.agents) - set(chosen))
+    if missing:
+        raise ValueError(f"{args.c_max_from} has no c_max for agent counts {missing} (it has {sorted(chosen)})")
+    return {k: chosen[k] for k in args.agents}, meta.get("validation_seed")
+
+
+def _load_models(args: argparse.Namespace, marl: dict) -> dict:
+    """The two agents (``--unconstrained`` / ``--constrained`` or the shipped ones) and the MARL policies."""
+    from agents import load_pretrained
+    from agents.search.models import default_second_opinion
+
+    models = {k: load_pretrained(args.env, kind=k, path=getattr(args, k)) for k in ("unconstrained", "constrained")}
+    models.update(marl)
+    if args.max_leg is not None and math.isfinite(args.max_leg) and default_second_opinion(
+            models["unconstrained"], models["constrained"]) is None:
+        raise ValueError("--max-leg needs a constrained agent with a distance critic of its own to read the legs with")
+    return models
+
+
+def _choose_c_max(args: argparse.Namespace, setup, methods, out, progress: bool):
+    """``--c-max auto``: the per-agent-count c_max chosen on validation problems (or before an
+    interruption, ``--resume``), written to ``c_max.json`` with the validation runs; and its seed."""
+    from agents.run_folder import write_atomic
+    from baselines.evaluation import VALIDATION_SEED_OFFSET, select_c_max, write_csv
+
+    if args.resume and (out / "c_max.json").exists():
+        meta = _read_c_max_file(out / "c_max.json", "--resume: the folder's")  # chosen before the interruption
+        return {k: float(meta["chosen"][str(k)]) for k in args.agents}, meta.get("validation_seed")
+    constrained = [m for m in methods if m.search and math.isfinite(m.c_max)]  # not empty: checked before
+    vseed = args.seed + VALIDATION_SEED_OFFSET if args.validation_seed is None else args.validation_seed
+    sel = select_c_max(setup, constrained[0], args.agents, args.difficulty, grid=args.c_max_grid,
+                       n_problems=args.validation_problems, seed=vseed, test_seed=args.seed,
+                       max_cycles=args.max_cycles, progress=progress, ray=args.ray)
+    write_csv(sel.rows, out / "validation_runs.csv")
+    write_atomic(out / "c_max.json", json.dumps(
+        {"chosen": {str(k): v for k, v in sel.chosen.items()}, "grid": sel.grid, "validation_seed": sel.seed,
+         "test_seed": args.seed, "validation_problems": args.validation_problems, "method": constrained[0].name,
+         "table": sel.table}, indent=1))
+    return sel.chosen, sel.seed
+
+
+def _edge_memories(args: argparse.Namespace, setup, methods, out, progress: bool, chosen, repair_seed: int) -> dict:
+    """``--repair-problems``: per search method, the edge memory its graph learns on the repair problems
+    (or learned before an interruption, ``--resume``), written to ``edge_memory_<method>.npz``."""
+    from agents.run_folder import atomic_output
+    from agents.search.execution.repair import EdgeMemory
+    from baselines.evaluation import learn_edge_memory
+
+    paths = {m.name: out / f"edge_memory_{m.name}.npz" for m in methods if m.search}
+    if args.resume and all(p.exists() for p in paths.values()):  # learned before the interruption
+        return {name: EdgeMemory.load(p) for name, p in paths.items()}
+    memories = learn_edge_memory(setup, methods, args.agents, args.difficulty, args.repair_problems,
+                                 seed=repair_seed, test_seed=args.seed, max_cycles=args.max_cycles,
+                                 progress=progress, policy_agents=args.policies_at, c_max_by_agents=chosen,
+                                 ray=args.ray)
+    for name, memory in memories.items():
+        with atomic_output(out / f"edge_memory_{name}.npz") as tmp:
+            memory.save(tmp)
+    return memories
+
+
+def _notes(args: argparse.Namespace, chosen, validation_seed, memories, repair_seed: int) -> str:
+    """The lines of ``table.md``'s header after its first: the chosen c_max, the method flags given, the
+    edges the repair problems removed."""
+    text = ""
+    if chosen is not None:
+        text += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
+                 + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
+    for row in METHOD_FLAGS:
+        if row.note and row.given(args) and (row.dest != "safety" or args.safety == "off"):
+            text += row.note.format(value=getattr(args, row.dest)) + "\n\n"
+    if memories:
+        text += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
+                 "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
+    return text
+
+
+def _write_tables(args: argparse.Namespace, out, rows, failures, names, notes: str, wall: float):
+    """Write ``table.csv``, ``table.json``, ``table.md`` and the failure anatomy; returns the
+    aggregated rows, the header and table printed, and the anatomy's table."""
+    from agents.run_folder import write_atomic
+    from baselines.evaluation import markdown_table, write_csv
+    from baselines.metrics import aggregate
+
     agg = aggregate(rows)
     write_csv(agg, out / "table.csv")
     write_atomic(out / "table.json", json.dumps(agg, indent=1))
     anatomy = write_anatomy(rows, failures, out, title=args.env)
-    names = [m.name for m in methods]
     table = markdown_table(agg, names)
-    wall = time.perf_counter() - t0
     header = (f"{args.env}: largest cumulative cost over agents, mean ± std over successful runs "
               f"(success rate; safety rate: the share of agents that never touched another); {args.problems} "
-              f"problem{'s' if args.problems != 1 else ''} per cell, seed {args.seed}, {wall:.0f} s\n\n")
-    if chosen is not None:
-        header += ("c_max chosen on validation problems (seed " + str(validation_seed) + "): "
-                   + ", ".join(f"{k} agent{'s' if k > 1 else ''}: {v:g}" for k, v in chosen.items()) + "\n\n")
-    for row in METHOD_FLAGS:
-        if row.note and row.given(args) and (row.dest != "safety" or args.safety == "off"):
-            header += row.note.format(value=getattr(args, row.dest)) + "\n\n"
-    if memories:
-        header += (f"--repair-problems {args.repair_problems} (seed {repair_seed}): edges removed after failed "
-                   "traversals, " + ", ".join(f"{k}: {len(m)}" for k, m in memories.items()) + "\n\n")
+              f"problem{'s' if args.problems != 1 else ''} per cell, seed {args.seed}, {wall:.0f} s\n\n") + notes
     write_atomic(out / "table.md", header + table + "\n\nMean cumulative cost over agents:\n\n"
                                   + markdown_table(agg, names, value="mean_cost") + "\n")
-    # the figure's rows: the smallest evaluated agent count and the largest one up to 10
+    return agg, header + table, anatomy
+
+
+def _draw(args: argparse.Namespace, out, setup, methods, chosen) -> None:
+    """The trajectory figure (``--figure``) and the GIF (``--video``): the smallest evaluated agent
+    count and the largest one up to 10, the constrained searches with the c_max chosen for the latter."""
+    from agents.run_folder import atomic_output
+
     counts = sorted(set(args.agents))
     multi = max([k for k in counts if k <= 10] or counts[:1])
-    fig_counts = sorted({counts[0], multi})
     fig_methods = methods
-    if chosen is not None:  # the constrained searches with the cut-off chosen for the figure's largest count
+    if chosen is not None:
         fig_methods = [m.with_options(c_max=chosen[multi]) if m.search and math.isfinite(m.c_max) else m
                        for m in methods]
     if args.figure:
         from baselines.figures import trajectory_figure
 
         with atomic_output(out / "figure.png") as tmp:
-            trajectory_figure(setup, fig_methods, tmp, agent_counts=fig_counts, seed=args.seed)
+            trajectory_figure(setup, fig_methods, tmp, agent_counts=sorted({counts[0], multi}), seed=args.seed)
     if args.video:
         from baselines.figures import run_animation
 
         search = [m for m in fig_methods if m.search] or list(fig_methods)
         with atomic_output(out / "run.gif") as tmp:
             run_animation(setup, search[-1], tmp, n_agents=multi, seed=args.seed, max_cycles=args.max_cycles)
-    if args.json:
-        print(json.dumps(agg))
-    else:
-        print(header + table)
-        print("\nWhy agents did not arrive (failed agents per reason):\n\n" + anatomy)
-        print(f"\nwrote {out / 'runs.csv'}, {out / 'table.csv'}, {out / 'table.json'}, {out / 'table.md'}, "
-              f"{out / 'failures.csv'}, {out / 'anatomy.md'}, {out / 'anatomy.png'}"
-              + (f", {out / 'figure.png'}" if args.figure else "") + (f", {out / 'run.gif'}" if args.video else ""))
-    return 0
 
 
 def _marl_models(args: argparse.Namespace, names) -> dict:
