@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
@@ -265,6 +266,9 @@ class BufferPlanner:
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
+        #: the matrices of the last endpoints attached, written over for the next ones of as many agents
+        #: where nothing refers to them any more (:meth:`_scratch_for`)
+        self._scratch: Optional[Tuple[np.ndarray, np.ndarray]] = None
 
     @property
     def buffer_graph(self) -> WaypointGraph:
@@ -360,8 +364,12 @@ class BufferPlanner:
         key = (starts.shape, starts.tobytes(), goals.tobytes())
         g = self.graph
         if self._attached is None or self._attached[0] != key:
-            self._attached = (key, attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
-                                                    self.graph.d_max))
+            self._attached = self._passing = self._long = None  # drop what refers to the last endpoints' matrices
+            size = len(self.observations) + 2 * len(starts)
+            D2, C2, obs = attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
+                                           self.graph.d_max, out=self._scratch_for(size))
+            self._scratch = (D2, C2)
+            self._attached = (key, (D2, C2, obs))
         passing = None
         if avoid is not None and len(avoid):
             at = np.asarray(avoid, dtype=self.observations.dtype)  # where parked agents stand, say
@@ -378,6 +386,19 @@ class BufferPlanner:
                                    second_opinion=self.second_opinion, detached=detached,
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing,
                                    max_leg=g.max_leg, long_edges=self._long_edges(key))
+
+    def _scratch_for(self, size: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """The last attached matrices, if they are ``(size, size)`` and nothing but this planner refers to
+        them (no problem graph, plan or view of them is alive): their buffer blocks are written already,
+        so attaching new endpoints of as many agents writes only the borders."""
+        if self._scratch is None or self._scratch[0].shape != (size, size):
+            return None
+        d2, c2 = self._scratch
+        # references to each: the scratch tuple's, the local name's and getrefcount's own argument
+        if sys.getrefcount(d2) > 3 or sys.getrefcount(c2) > 3:
+            self._scratch = None  # still in use: the next attach makes new ones
+            return None
+        return self._scratch
 
     def _long_edges(self, key: Tuple[Any, ...]) -> Optional[np.ndarray]:
         """The edges of the attached problem (``key``: its endpoints) that ``second_opinion`` reads beyond

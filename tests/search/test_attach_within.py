@@ -63,3 +63,28 @@ def test_plans_are_those_of_scoring_every_pair(setting, solver):
     prox = planner.problem_proximity(a.problem.D, len(starts))
     assert validate(dur, a.problem.start_ids, a.problem.goal_ids, a.cbs.paths, time_model="durative",
                     proximity=prox) == []
+
+
+def test_attaching_new_endpoints_writes_over_the_last_matrices_only_where_nothing_uses_them():
+    """A planner reuses the matrices of the last endpoints it attached for the next ones of as many
+    agents (only their borders are written), unless a plan or problem graph made on them is alive."""
+    from test_planner import euclid_pairwise, grid_points
+
+    from agents.search import BufferPlanner
+
+    pts = grid_points(12)
+    pairwise = euclid_pairwise()
+    D, C = pairwise(pts, pts)
+    planner = BufferPlanner(pts, D, C, pairwise).with_options(d_max=2.5)
+    first = planner.plan(pts[[0]] + 0.1, pts[[50]] + 0.1)
+    kept = first.problem.D.copy()
+    planner.plan(pts[[3]] + 0.1, pts[[70]] + 0.1)
+    np.testing.assert_array_equal(first.problem.D, kept)  # alive: not written over
+    del first
+    before = id(planner._scratch[0])
+    again = planner.plan(pts[[5]] + 0.1, pts[[90]] + 0.1)
+    assert id(planner._scratch[0]) == before  # nothing used them: written over
+    fresh = BufferPlanner(pts, D, C, pairwise).with_options(d_max=2.5).plan(pts[[5]] + 0.1, pts[[90]] + 0.1)
+    np.testing.assert_array_equal(again.problem.D, fresh.problem.D)
+    np.testing.assert_array_equal(again.problem.C, fresh.problem.C)
+    assert again.nodes == fresh.nodes and again.soc == fresh.soc

@@ -579,6 +579,7 @@ class ProblemGraph:
 def attach_endpoints(
     observations: np.ndarray, D: np.ndarray, C: np.ndarray, pairwise: PairwiseFn,
     starts: np.ndarray, goals: np.ndarray, d_max: Optional[float] = None,
+    out: Optional[Tuple[np.ndarray, np.ndarray]] = None,
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dense ``(D, C)`` over buffer nodes + starts + goals (``pairwise`` scores the new pairs), and
     the observations in that order.
@@ -588,6 +589,11 @@ def attach_endpoints(
     get a distance ``>= d_max`` and an infinite cost. Every edge, proximity and nearness test of
     the planner asks for distances below ``d_max`` (or below smaller radii), so its answers do
     not change; the matrices of such a problem are exact only below ``d_max``.
+
+    ``out``: two ``(N + M, N + M)`` matrices whose top-left blocks hold ``D`` and ``C`` already
+    (those of an earlier call with as many endpoints, that nothing uses any more): only their
+    borders are written, and they are returned. Copying a large buffer's matrices is most of the
+    work of attaching one agent's endpoints.
     """
     n, m = len(observations), 2 * len(starts)
     ends = np.concatenate([starts, goals])
@@ -596,10 +602,13 @@ def attach_endpoints(
     d_ne, c_ne = score(observations, ends)
     d_en, c_en = score(ends, observations)
     d_ee, c_ee = score(ends, ends)
-    D2 = np.empty((n + m, n + m))
-    C2 = np.empty((n + m, n + m))
-    D2[:n, :n], D2[:n, n:], D2[n:, :n], D2[n:, n:] = D, d_ne, d_en, d_ee
-    C2[:n, :n], C2[:n, n:], C2[n:, :n], C2[n:, n:] = C, c_ne, c_en, c_ee
+    if out is not None and out[0].shape == (n + m, n + m) and out[1].shape == (n + m, n + m):
+        D2, C2 = out
+    else:
+        D2, C2 = np.empty((n + m, n + m)), np.empty((n + m, n + m))
+        D2[:n, :n], C2[:n, :n] = D, C
+    D2[:n, n:], D2[n:, :n], D2[n:, n:] = d_ne, d_en, d_ee
+    C2[:n, n:], C2[n:, :n], C2[n:, n:] = c_ne, c_en, c_ee
     return D2, C2, np.concatenate([observations, ends])
 
 
