@@ -26,8 +26,11 @@ script sets ``OMP_NUM_THREADS=1`` (unless it is set) and one torch thread. Where
 installed the solvers' compiled loops are used (the same plans, faster; see
 :mod:`agents.search.mapf.compiled`); the script says which, and compiles them before timing.
 
+With ``--replans N`` it first times ``N`` one-agent plans from new places around 50 parked agents,
+as a stuck agent's replan asks them of the planner.
+
 Run: ``OMP_NUM_THREADS=1 python examples/bench_large_map_planning.py [--agents 100 250 500 1000]
-[--repeats 5] [--nodes 4000] [--solvers auto] [--seed 0]``
+[--repeats 5] [--nodes 4000] [--solvers auto] [--seed 0] [--replans 10]``
 """
 from __future__ import annotations
 
@@ -129,7 +132,7 @@ def check(planner, plan) -> bool:
     # the proximity the planner plans with (starts among themselves, goals among themselves exempt)
     prox = planner.problem_proximity(problem.D, problem.n_agents)
     return not validate(durations, list(problem.start_ids), list(problem.goal_ids), plan.cbs.paths,
-                        time_model=planner.time_model, proximity=prox)
+                        time_model=planner.graph.time_model, proximity=prox)
 
 
 def warm_up() -> None:
@@ -140,6 +143,22 @@ def warm_up() -> None:
     solve_prioritized(MapfInstance(line, [0], [2], time_model="durative"))
 
 
+def time_replans(planner, obs: np.ndarray, n: int, seed: int) -> None:
+    """Time ``n`` one-agent plans from new places to one goal around 50 parked agents and 3 banned nodes (what
+    a stuck agent's replan asks the planner; nothing of one plan is kept for the next)."""
+    rng = np.random.default_rng([seed, 1])
+    idx = rng.choice(len(obs), 55 + n, replace=False)
+    goal, parked, banned = obs[idx[0]], obs[idx[1:51]], [int(i) for i in idx[51:54]]
+    wall, cpu = [], []
+    for k in range(n):
+        t, c = time.perf_counter(), time.process_time()
+        planner.plan(obs[idx[55 + k]][None], goal[None], exclude=banned, avoid=parked)
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    print(f"one-agent replans around 50 parked agents: median {np.median(wall):.3f} s (CPU {np.median(cpu):.3f} s) "
+          f"over {n}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--agents", type=int, nargs="+", default=[100, 250, 500, 1000])
@@ -147,6 +166,9 @@ def main() -> None:
     ap.add_argument("--nodes", type=int, default=4000)
     ap.add_argument("--solvers", nargs="+", default=["auto"], choices=SOLVERS)
     ap.add_argument("--seed", type=int, default=0, help="seeds the graph's nodes and the problems")
+    ap.add_argument("--replans", type=int, default=0, metavar="N",
+                    help="also time N one-agent plans from new places to one goal with 50 agents parked, as a stuck "
+                         "agent's replan makes them (median; default 0: none)")
     ap.add_argument("--time-limit", type=float, default=600.0,
                     help="seconds per solver call: a safety net behind the planner's budgets in work")
     args = ap.parse_args()
@@ -162,6 +184,8 @@ def main() -> None:
     env_id, env, states, obs, planner = build(args.nodes, args.seed)
     shortest = dijkstra(planner.buffer_graph.distance, directed=True)
     min_sep = default_min_separation(env_id)
+    if args.replans:
+        time_replans(planner, obs, args.replans, args.seed)
     for k in args.agents:
         problems = draw_problems(states, planner.D, shortest, k, args.repeats, args.seed, min_sep,
                                  planner.graph.proximity_radius or 0.0)
