@@ -101,7 +101,7 @@ class GraphConfig:
             (:func:`~agents.search.graph.pruning.admit_cheaper_routes`; ``None``: off).
         detour: where ``c_max`` leaves an agent only a route more than this many times as long as
             its shortest route without the cut-off, and costlier at all, that route is admitted too
-            (``None``: off).
+            (``None``: off). A test of the cost guard's admission: it acts only with ``cost_guard``.
         max_leg: no edge the planner's ``second_opinion`` reads beyond this many steps is planned,
             nor admitted past the cost cut-off (:func:`~agents.search.graph.pruning.long_legs`; needs a
             second opinion; ``None`` or ``inf``: off).
