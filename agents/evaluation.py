@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import gymnasium as gym
 import numpy as np
@@ -33,6 +33,17 @@ def _make_env(env: gym.Env | str) -> gym.Env:
 
         return gym.make(env)
     return env
+
+
+def _lockstep_envs(base: gym.Env, n: int) -> List[gym.Env]:
+    """``base``'s unwrapped env and ``n - 1`` more made like it (no time limit: the caller counts steps)."""
+    spec = base.spec
+    envs: List[gym.Env] = [base.unwrapped]
+    kwargs = dict(spec.kwargs) if spec is not None else {}
+    entry = type(base.unwrapped)
+    while len(envs) < n:
+        envs.append(entry(**kwargs))
+    return envs
 
 
 def sample_problems(
@@ -91,11 +102,7 @@ def run_episodes(
         max_steps = spec.max_episode_steps if spec is not None and spec.max_episode_steps else 20
     starts, goals = np.asarray(starts, float).reshape(-1, 2), np.asarray(goals, float).reshape(-1, 2)
     n = len(starts)
-    envs: List[gym.Env] = [base.unwrapped]
-    kwargs = dict(spec.kwargs) if spec is not None else {}
-    entry = type(base.unwrapped)
-    while len(envs) < min(batch, n):
-        envs.append(entry(**kwargs))
+    envs = _lockstep_envs(base, min(batch, n))
     out = {"success": np.zeros(n, bool), "steps": np.zeros(n, int), "cost": np.zeros(n),
            "final_distance": np.zeros(n)}
     for b0 in range(0, n, len(envs)):
@@ -118,6 +125,110 @@ def run_episodes(
                 if term:
                     out["success"][i] = True
                     active[k] = False
+    return out
+
+
+ADVANCE_RULES = ("critic", "reach")
+
+
+def _leg_goal(obs: Dict[str, np.ndarray], waypoints: Optional[np.ndarray], leg: int, n_points: int) -> np.ndarray:
+    """The goal observation of a route's ``leg``-th point: a waypoint's, or the env's own goal for the last."""
+    if leg == n_points - 1 or waypoints is None:
+        return obs["desired_goal"]
+    return waypoints[leg - 1]
+
+
+def run_routes(
+    model: Any,
+    env: gym.Env | str,
+    routes: Sequence[np.ndarray],
+    advance: str = "critic",
+    advance_distance: float = 2.0,
+    max_steps: int = 300,
+    batch: int = 50,
+) -> Dict[str, np.ndarray]:
+    """Drive the policy along each route open loop: from ``routes[i][0]`` through its waypoints to ``routes[i][-1]``.
+
+    ``routes[i]`` is a ``(W, 2)`` array of positions (world units): the start, the waypoints and the
+    goal. The policy is given the observation at its current waypoint as its goal and moves on to the
+    next one once ``advance`` says so, at most one waypoint per step:
+
+    - ``"critic"``: once the model's own predicted distance to the waypoint is below
+      ``advance_distance`` (the rule of the published code of the paper: no localisation, no
+      rescue);
+    - ``"reach"``: once the agent is truly within the env's ``goal_threshold`` of it (ground truth: an
+      agent whose every waypoint is checked for it, which isolates its driving from its critic).
+
+    A route succeeds when the agent reaches its goal (the env's termination) within ``max_steps``.
+    Episodes run in lockstep batches of ``batch`` envs (one batched policy call per step).
+
+    Returns arrays ``success`` (bool), ``steps``, ``cost``, ``hops`` (legs of the route, ``W - 1``),
+    ``advanced`` (waypoints moved past before the end), ``pass_distance`` (the agent's mean distance
+    from a waypoint when it moved past it, world units; NaN where it passed none) and ``stuck_at``
+    (index of the leg a failed route ended on, ``-1`` for a success).
+    """
+    if advance not in ADVANCE_RULES:
+        raise ValueError(f"advance must be one of {', '.join(ADVANCE_RULES)}, got {advance!r}")
+    if max_steps < 1 or batch < 1:
+        raise ValueError(f"max_steps and batch must be >= 1, got {max_steps}, {batch}")
+    paths = [np.asarray(r, float).reshape(-1, 2) for r in routes]
+    for i, r in enumerate(paths):
+        if len(r) < 2 or not np.isfinite(r).all():
+            raise ValueError(f"route {i} needs a start and a goal of finite positions, got {r.tolist()}")
+    base = _make_env(env)
+    n = len(paths)
+    out = {"success": np.zeros(n, bool), "steps": np.zeros(n, int), "cost": np.zeros(n),
+           "hops": np.array([len(r) - 1 for r in paths]), "advanced": np.zeros(n, int),
+           "pass_distance": np.full(n, np.nan), "stuck_at": -np.ones(n, int)}
+    if not n:
+        return out
+    envs = _lockstep_envs(base, min(batch, n))
+    u: Any = envs[0]
+    threshold = float(u.goal_threshold)
+    # the observation at every waypoint (the goal's comes from the env itself)
+    wp_obs = [observations_at(base, r[1:-1]) if len(r) > 2 else None for r in paths]
+    for b0 in range(0, n, len(envs)):
+        idx = np.arange(b0, min(n, b0 + len(envs)))
+        obs = [envs[k].reset(options={"start": paths[i][0], "goal": paths[i][-1]})[0] for k, i in enumerate(idx)]
+        leg = np.ones(len(idx), int)  # index of the route point each agent drives to, 1..W-1
+        pos = np.stack([paths[i][0] for i in idx])
+        active = np.ones(len(idx), bool)
+        for t in range(max_steps):
+            live = np.flatnonzero(active)
+            if not len(live):
+                break
+            ahead = [k for k in live if leg[k] < len(paths[idx[k]]) - 1]
+            if ahead:
+                if advance == "critic":
+                    o = np.stack([obs[k]["observation"] for k in ahead])
+                    g = np.stack([_leg_goal(obs[k], wp_obs[idx[k]], leg[k], len(paths[idx[k]])) for k in ahead])
+                    near = np.asarray(model.distance(o, g, aggregate="max")) < advance_distance
+                else:
+                    near = np.array([np.linalg.norm(pos[k] - paths[idx[k]][leg[k]]) <= threshold for k in ahead])
+                for k in np.asarray(ahead)[near]:
+                    i = idx[k]
+                    passed = float(np.linalg.norm(pos[k] - paths[i][leg[k]]))
+                    done = out["advanced"][i]
+                    out["pass_distance"][i] = (passed if done == 0 else
+                                               (out["pass_distance"][i] * done + passed) / (done + 1))
+                    out["advanced"][i] += 1
+                    leg[k] += 1
+            batch_obs = {key: np.stack([obs[k][key] for k in live]) for key in obs[0]}
+            batch_obs["desired_goal"] = np.stack([_leg_goal(obs[k], wp_obs[idx[k]], leg[k], len(paths[idx[k]]))
+                                                  for k in live])
+            actions, _ = model.predict(batch_obs, deterministic=True)
+            for a, k in zip(actions, live):
+                o_k, _, term, _, info = envs[k].step(a)
+                obs[k] = o_k
+                pos[k] = info["position"]
+                i = idx[k]
+                out["cost"][i] += info["cost"]
+                out["steps"][i] = t + 1
+                if term:
+                    out["success"][i] = True
+                    active[k] = False
+        for k in np.flatnonzero(active):
+            out["stuck_at"][idx[k]] = leg[k] - 1
     return out
 
 
@@ -235,9 +346,11 @@ class PeriodicEvaluation(BaseCallback):
 
 
 __all__ = [
+    "ADVANCE_RULES",
     "PeriodicEvaluation",
     "distance_rank_correlation",
     "evaluate_agent",
     "run_episodes",
+    "run_routes",
     "sample_problems",
 ]
