@@ -55,6 +55,7 @@ from .graph.build import (
     check_endpoints,
     passing_edges,
 )
+from .graph.edges import EdgeList, problem_edges
 from .graph.pruning import long_legs, route_from_predecessors
 from .graph.single import lagrangian_risk_path, risk_bounded_path, shortest_path
 from .graph.sparsify import two_way_consistent
@@ -266,6 +267,10 @@ class BufferPlanner:
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
+        #: the buffer's edges shorter than d_max, by d_max (shared by the planners over the same matrices), and
+        #: the candidate edges of the last endpoints attached
+        self._short: Dict[float, EdgeList] = {}
+        self._edges: Optional[EdgeList] = None
         #: the matrices of the last endpoints attached, written over for the next ones of as many agents
         #: where nothing refers to them any more (:meth:`_scratch_for`)
         self._scratch: Optional[Tuple[np.ndarray, np.ndarray]] = None
@@ -333,7 +338,7 @@ class BufferPlanner:
         """A planner over the same nodes, matrices and second opinion with these configs."""
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver,
                             second_opinion=self.second_opinion)
-        out._long_legs = self._long_legs
+        out._long_legs, out._short = self._long_legs, self._short
         return out
 
     def with_options(self, second_opinion: Any = _KEEP, **changes: Any) -> "BufferPlanner":
@@ -343,6 +348,7 @@ class BufferPlanner:
         graph, solver = _vary(self.graph, self.solver_config, changes)
         opinion = self.second_opinion if second_opinion is _KEEP else second_opinion
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver, second_opinion=opinion)
+        out._short = self._short
         if out.second_opinion is self.second_opinion:
             out._long_legs = self._long_legs
         return out
@@ -364,12 +370,14 @@ class BufferPlanner:
         key = (starts.shape, starts.tobytes(), goals.tobytes())
         g = self.graph
         if self._attached is None or self._attached[0] != key:
-            self._attached = self._passing = self._long = None  # drop what refers to the last endpoints' matrices
+            # drop what refers to the last endpoints' matrices
+            self._attached = self._passing = self._long = self._edges = None
             size = len(self.observations) + 2 * len(starts)
             D2, C2, obs = attach_endpoints(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                            self.graph.d_max, out=self._scratch_for(size))
             self._scratch = (D2, C2)
             self._attached = (key, (D2, C2, obs))
+            self._edges = problem_edges(self._short_edges(), D2, C2, len(self.observations), g.d_max)
         passing = None
         if avoid is not None and len(avoid):
             at = np.asarray(avoid, dtype=self.observations.dtype)  # where parked agents stand, say
@@ -385,7 +393,14 @@ class BufferPlanner:
                                    cost_guard=g.cost_guard, detour=g.detour,
                                    second_opinion=self.second_opinion, detached=detached,
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing,
-                                   max_leg=g.max_leg, long_edges=self._long_edges(key))
+                                   max_leg=g.max_leg, long_edges=self._long_edges(key), edges=self._edges)
+
+    def _short_edges(self) -> EdgeList:
+        """The buffer's edges shorter than ``d_max`` (found once per ``d_max``)."""
+        d_max = self.graph.d_max
+        if d_max not in self._short:
+            self._short[d_max] = EdgeList.short(self.D, self.C, d_max)
+        return self._short[d_max]
 
     def _scratch_for(self, size: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
         """The last attached matrices, if they are ``(size, size)`` and nothing but this planner refers to
@@ -409,10 +424,11 @@ class BufferPlanner:
         assert read is not None and self._attached is not None  # checked in __init__; attached by the caller
         d_max, max_leg = self.graph.d_max, self.graph.max_leg
         if (d_max, max_leg) not in self._long_legs:
-            self._long_legs[(d_max, max_leg)] = long_legs(self.D, self.observations, n, d_max, read, max_leg)
+            self._long_legs[(d_max, max_leg)] = long_legs(self._short_edges(), self.observations, n, read, max_leg)
         if self._long is None or self._long[0] != key:
-            D2, _, obs = self._attached[1]
-            self._long = (key, long_legs(D2, obs, n, d_max, read, max_leg, self._long_legs[(d_max, max_leg)]))
+            _, _, obs = self._attached[1]
+            assert self._edges is not None  # made with the attached matrices
+            self._long = (key, long_legs(self._edges, obs, n, read, max_leg, self._long_legs[(d_max, max_leg)]))
         return self._long[1]
 
     def plan(self, starts: np.ndarray, goals: np.ndarray, budget: Optional[float] = None,

@@ -308,7 +308,10 @@ def test_passing_edges_compare_only_the_nodes_near_a_place(d_max):
     to_place, _ = dist(pts, places)
     from_place, _ = dist(places, pts)
     tables = iter([(to_place, None), (from_place, None)])
-    out = passing_edges(D, pts, lambda a, b: next(tables), places, slack=0.5, d_max=d_max)
+    pairs = passing_edges(D, pts, lambda a, b: next(tables), places, slack=0.5, d_max=d_max)
+    out = np.zeros(D.shape, bool)
+    out[pairs[:, 0], pairs[:, 1]] = True
+    assert len(np.unique(pairs, axis=0)) == len(pairs)
     every = np.zeros_like(out)
     for j in range(len(places)):
         every |= to_place[:, j, None] + from_place[j, None, :] <= D + 0.5

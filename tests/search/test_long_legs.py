@@ -6,7 +6,8 @@ import pytest
 import safe_mapf_envs  # noqa: F401  (registers the environments)
 from agents.search import BufferPlanner, SearchPolicy, build_problem_graph
 from agents.search.config import GraphConfig
-from agents.search.graph.pruning import admissible, long_legs
+from agents.search.graph.edges import EdgeList, problem_edges
+from agents.search.graph.pruning import long_legs
 from agents.search.models import SecondOpinion
 from tests.conftest import StraightLineAgent
 
@@ -44,20 +45,21 @@ def hops(plan):
 
 def test_long_legs_are_the_admissible_edges_read_beyond_the_limit():
     pts = np.concatenate([ZIGZAG, START, GOAL])
-    D, _ = pairwise(pts, pts)
+    D, C = pairwise(pts, pts)
+    edges = problem_edges(EdgeList.short(D[:5, :5], C[:5, :5], 2.5), D, C, 5, 2.5)
     reader = Reader()
-    found = long_legs(D, pts, 5, 2.5, reader, 10.0)
-    allowed = np.argwhere(admissible(D, 5, 2.5))
-    assert reader.read == len(allowed)
+    found = long_legs(edges, pts, 5, reader, 10.0)
+    allowed = edges.pairs()
+    assert reader.read == len(allowed) and len(allowed) == int(((D < 2.5) & ~np.eye(7, dtype=bool)).sum()) - 4
     length = np.linalg.norm(pts[allowed[:, 1]] - pts[allowed[:, 0]], axis=-1)
     assert {tuple(e) for e in found} == {tuple(e) for e in allowed[length > 1.8]}
     assert (6, 4) not in {tuple(e) for e in found}  # a goal is only entered
     # with the buffer's own given, only the start's and goal's edges are read
     buffer_long = found[(found < 5).all(axis=1)]
     reader2 = Reader()
-    again = long_legs(D, pts, 5, 2.5, reader2, 10.0, buffer_long=buffer_long)
+    again = long_legs(edges, pts, 5, reader2, 10.0, buffer_long=buffer_long)
     assert {tuple(e) for e in again} == {tuple(e) for e in found}
-    assert reader2.read == len(allowed) - int(admissible(D, 5, 2.5)[:5, :5].sum())
+    assert reader2.read == len(allowed) - int(((allowed < 5).all(axis=1)).sum())
 
 
 @pytest.mark.parametrize("cost, c_max", [(0.0, np.inf), (1.0, 0.01)])
@@ -89,7 +91,7 @@ def test_the_buffer_is_read_once_for_the_planners_with_options_makes():
     first = reader.read
     b = base.with_options(max_leg=10.0, c_max=5.0)
     b.plan(START + 0.1, GOAL)
-    buffer_pairs = int(admissible(D, 5, 2.5).sum())
+    buffer_pairs = len(EdgeList.short(D, C, 2.5))
     assert reader.read - first < first - buffer_pairs + 1  # only the new start's and goal's edges
     # graphs tried again for the same endpoints (a replan's) read nothing more
     reads = reader.read

@@ -331,8 +331,23 @@ def test_the_cost_cutoff_never_sends_an_agent_the_long_way_round_to_a_far_higher
         make_planner(pts, pw, cost_guard=0.5)
 
 
+def admit(keep, D, C, exclude_edges=None, **kwargs):
+    """admit_cheaper_routes on a dense hand-made problem graph (buffer nodes 0, 1; start 2; goal 3; d_max 5):
+    edits the dense ``keep`` and returns which agents were admitted."""
+    from agents.search.graph.edges import EdgeList, problem_edges
+    from agents.search.graph.pruning import admissible, admit_cheaper_routes
+
+    edges = problem_edges(EdgeList.short(D[:2, :2], C[:2, :2], 5.0), D, C, 2, 5.0)
+    mask = keep[edges.u, edges.v]
+    admitted = admit_cheaper_routes(mask, edges, D, C, 2, 5.0, admissible(edges, exclude_edges=exclude_edges),
+                                    **kwargs)
+    keep[:] = edges.dense(mask)
+    return admitted
+
+
 def test_admit_cheaper_routes_on_a_hand_made_graph():
-    from agents.search.graph.pruning import admit_cheaper_routes, shortest_routes
+    from agents.search.graph.edges import EdgeList
+    from agents.search.graph.pruning import shortest_routes
 
     # buffer nodes 0, 1; start 2, goal 3. The cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3 by 3 hops);
     # the plain shortest route 2 -> 3 costs 2 by one hop
@@ -341,35 +356,34 @@ def test_admit_cheaper_routes_on_a_hand_made_graph():
     C[2, 3] = 2.0
     keep = np.zeros((4, 4), dtype=bool)
     keep[2, 0] = keep[0, 1] = keep[1, 3] = True
-    assert shortest_routes(keep, D, np.array([2]), np.array([3])) == [[2, 0, 1, 3]]
-    assert shortest_routes(keep, D, np.array([3]), np.array([2])) == [None]
-    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0).any()  # 3 is within twice 2
+    kept = EdgeList.from_dense_mask(D, C, keep)
+    assert shortest_routes(kept, None, np.array([2]), np.array([3])) == [[2, 0, 1, 3]]
+    assert shortest_routes(kept, None, np.array([3]), np.array([2])) == [None]
+    assert not admit(keep.copy(), D, C).any()  # 3 is within twice 2
     # but the detour is three times as long and costlier: it buys nothing
-    assert admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=1.5).tolist() == [True]
+    assert admit(keep.copy(), D, C, detour=1.5).tolist() == [True]
     # as long, or no costlier: kept
-    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=3.0).any()
+    assert not admit(keep.copy(), D, C, detour=3.0).any()
     C[2, 3] = 3.0
-    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, detour=1.5).any()
+    assert not admit(keep.copy(), D, C, detour=1.5).any()
     C[2, 3] = 2.0
-    admitted = admit_cheaper_routes(keep, D, C, 2, d_max=5.0, factor=1.0)
+    admitted = admit(keep, D, C, factor=1.0)
     assert admitted.tolist() == [True] and keep[2, 3]
     # the direct hop costing more than the detour is not admitted
     keep2 = np.zeros((4, 4), dtype=bool)
     keep2[2, 0] = keep2[0, 1] = keep2[1, 3] = True
     C[2, 3] = 5.0
-    assert admit_cheaper_routes(keep2, D, C, 2, d_max=5.0, factor=1.0).tolist() == [False] and not keep2[2, 3]
+    assert admit(keep2, D, C, factor=1.0).tolist() == [False] and not keep2[2, 3]
     # an excluded edge is never admitted: the plain route is then 2 -> 1 -> 3 (cost 2)
     C[2, 3] = 2.0
     keep3 = np.zeros((4, 4), dtype=bool)
     keep3[2, 0] = keep3[0, 1] = keep3[1, 3] = True
-    admitted = admit_cheaper_routes(keep3, D, C, 2, d_max=5.0, exclude_edges=np.array([[2, 3]]), factor=1.0)
+    admitted = admit(keep3, D, C, exclude_edges=np.array([[2, 3]]), factor=1.0)
     assert admitted.tolist() == [True]
     assert keep3[2, 1] and not keep3[2, 3]
 
 
 def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
-    from agents.search.graph.pruning import admit_cheaper_routes
-
     # start 2, goal 3; the cut-off keeps 2 -> 0 -> 1 -> 3 (hops of 2 steps, cost 3); the direct hop
     # costs 1. d_max 5: hops shorter than 2.5 corroborate, and the only chain is that route (6 steps);
     # the goal reads the start 8 steps away (more than 1.5 d_max)
@@ -384,14 +398,14 @@ def test_a_shortcut_no_chain_of_short_hops_corroborates_is_not_admitted():
         return keep, D, C
 
     keep, D, C = graph(direct=2.6)  # 6 steps of chain for a hop of 2.6: a wormhole
-    assert not admit_cheaper_routes(keep, D, C, 2, d_max=5.0).any() and not keep[2, 3]
+    assert not admit(keep, D, C).any() and not keep[2, 3]
     keep, D, C = graph(direct=3.5)  # within twice the hop: a real shortcut
-    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
+    assert admit(keep, D, C).tolist() == [True] and keep[2, 3]
     keep, D, C = graph(direct=2.6)
-    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0, corroboration=3.0).tolist() == [True]
+    assert admit(keep, D, C, corroboration=3.0).tolist() == [True]
     # a hop out of a sparse corner: no chain, but the critic reads it alike both ways
     keep, D, C = graph(direct=2.6, reverse=3.0)
-    assert admit_cheaper_routes(keep, D, C, 2, d_max=5.0).tolist() == [True] and keep[2, 3]
+    assert admit(keep, D, C).tolist() == [True] and keep[2, 3]
 
 
 def test_a_second_critic_vouches_for_a_hop_nothing_else_backs():
@@ -399,7 +413,7 @@ def test_a_second_critic_vouches_for_a_hop_nothing_else_backs():
     wormhole; a second critic that reads it short too gets it trusted, one that reads it long does not."""
     from scipy import sparse
 
-    from agents.search.graph.pruning import admit_cheaper_routes, trusted_edges
+    from agents.search.graph.pruning import trusted_edges
 
     # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 3); the direct hop reads 2.6 steps (cost 1),
     # no chain backs it and the goal reads the start 8 steps away (more than 1.5 * d_max)
@@ -426,9 +440,9 @@ def test_a_second_critic_vouches_for_a_hop_nothing_else_backs():
     # only the hops nothing else backs are put to it (2 -> 0 -> 1 -> 3 has its chain)
     asked.clear()
     assert trusted_edges([2, 0, 1, 3], D, C, hops, d_max=5.0, confirm=second(19.5)).all() and asked == []
-    assert not admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0, confirm=second(19.5)).any()
+    assert not admit(keep.copy(), D, C, confirm=second(19.5)).any()
     k2 = keep.copy()
-    assert admit_cheaper_routes(k2, D, C, 2, d_max=5.0, confirm=second(3.0)).tolist() == [True] and k2[2, 3]
+    assert admit(k2, D, C, confirm=second(3.0)).tolist() == [True] and k2[2, 3]
     # a hop that costs more than its steps can is not vouched for, whatever the second critic reads
     C[2, 3] = 7.5
     assert trusted_edges([2, 3], D, C, hops, d_max=5.0, confirm=second(2.0)).tolist() == [False]
@@ -479,7 +493,7 @@ def test_the_planner_asks_its_second_opinion_on_observations():
 def test_a_hop_that_costs_more_than_its_steps_can_is_not_trusted():
     from scipy import sparse
 
-    from agents.search.graph.pruning import admit_cheaper_routes, trusted_edges
+    from agents.search.graph.pruning import trusted_edges
 
     # start 2, goal 3: the cut-off keeps 2 -> 0 -> 1 -> 3 (cost 15), the direct hop reads 2 steps
     D = np.full((4, 4), 2.0)
@@ -489,12 +503,12 @@ def test_a_hop_that_costs_more_than_its_steps_can_is_not_trusted():
     hops = sparse.csr_matrix(D)
     C[2, 3] = 6.0  # at most 1 a step: 2 steps may cost (with the margin) up to 2 * (2 + 1)
     assert trusted_edges([2, 3], D, C, hops, d_max=5.0).tolist() == [True]
-    assert admit_cheaper_routes(keep.copy(), D, C, 2, d_max=5.0).tolist() == [True]
+    assert admit(keep.copy(), D, C).tolist() == [True]
     C[2, 3] = 6.5  # a wormhole: two panoramas alike, far apart, and the cost critic sees the long way
     assert trusted_edges([2, 3], D, C, hops, d_max=5.0).tolist() == [False]
     assert trusted_edges([2, 3], D, C, hops, d_max=5.0, cost_rate=3.0).tolist() == [True]
     assert trusted_edges([2, 0, 1, 3], D, C, hops, d_max=5.0).tolist() == [True, True, True]
-    assert not admit_cheaper_routes(keep, D, C, 2, d_max=5.0).any() and not keep[2, 3]
+    assert not admit(keep, D, C).any() and not keep[2, 3]
 
 
 def test_the_endpoints_are_attached_once_for_the_graphs_of_one_place():

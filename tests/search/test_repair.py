@@ -389,7 +389,9 @@ def test_passing_edges_are_those_that_go_through_a_place():
     world = OpenWorld()
     pts = np.array([(0.0, 0.0), (4.0, 0.0), (2.0, 3.0), (2.0, 0.5)], np.float32)
     D, _ = world.pairwise(pts, pts)
-    out = passing_edges(D, pts, world.pairwise, np.array([(2.0, 0.0)], np.float32), slack=1.0)
+    pairs = passing_edges(D, pts, world.pairwise, np.array([(2.0, 0.0)], np.float32), slack=1.0)
+    out = np.zeros(D.shape, bool)
+    out[pairs[:, 0], pairs[:, 1]] = True
     assert out[0, 1] and out[1, 0]  # straight through it
     assert out[0, 3] and out[3, 1]  # ending by it (within the slack), starting by it
     assert not out[0, 2] and not out[2, 1] and not out[2, 0]  # well clear of it

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from agents.search import BufferPlanner
+from agents.search.graph.edges import EdgeList
 from agents.search.graph.sparsify import cap_out_edges, two_way_consistent
 
 
@@ -39,15 +40,20 @@ def test_merging_spreads_random_nodes_apart():
 
 def test_cap_keeps_each_nodes_shortest_edges():
     D = line_world(np.arange(6.0))
-    keep = D < 4.5
-    np.fill_diagonal(keep, False)
-    capped = cap_out_edges(keep.copy(), D, k=2)
-    assert (capped.sum(axis=1) <= 2).all() and (capped <= keep).all()
+    edges = EdgeList.short(D, D, 4.5)
+    keep = np.ones(len(edges), bool)
+    capped = edges.dense(cap_out_edges(keep.copy(), edges, k=2))
+    assert (capped.sum(axis=1) <= 2).all() and (capped <= edges.dense()).all()
     assert capped[3].nonzero()[0].tolist() == [2, 4]  # its two nearest
-    ends = cap_out_edges(np.ones((5, 5), bool), np.ones((5, 5)), k=1, n_buffer=3)
-    assert ends[:3, :3].sum() == 3 and ends[3:].all() and ends[:, 3:].all()  # endpoints untouched
+    assert capped[0].nonzero()[0].tolist() == [1, 2]
+    half = keep.copy()
+    half[edges.find([3], [2])] = False  # a pruned edge is not counted: 3 keeps 4 and then 1 or 5
+    assert edges.dense(cap_out_edges(half, edges, k=2))[3].nonzero()[0].tolist() == [1, 4]
+    ones = EdgeList.short(np.ones((5, 5)), np.ones((5, 5)), 2.0)
+    ends = ones.dense(cap_out_edges(np.ones(len(ones), bool), ones, k=1, n_buffer=3))
+    assert ends[:3, :3].sum() == 3 and ends[3:, :].sum() == 8 and ends[:3, 3:].all()  # endpoints untouched
     with pytest.raises(ValueError, match="k must be"):
-        cap_out_edges(keep, D, k=0)
+        cap_out_edges(keep, edges, k=0)
 
 
 def test_planner_sparsified_and_capped(stand_in_models):

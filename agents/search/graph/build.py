@@ -21,7 +21,8 @@ import numpy as np
 from scipy import sparse
 
 from ...run_folder import read_npz
-from .pruning import _MIN_DISTANCE, admissible, admit_cheaper_routes, long_legs, relax_cost_locally
+from .edges import MIN_WEIGHT, EdgeList, problem_edges
+from .pruning import admissible, admit_cheaper_routes, long_legs, relax_cost_locally
 from .sparsify import cap_out_edges
 
 #: ``pairwise(obs_a, obs_b) -> (D, C)``, each of shape ``(len(obs_a), len(obs_b))``.
@@ -88,8 +89,8 @@ class NodePairwise:
                                    chunk_size=8192, within=d_max)
 
 
-#: sparse storage drops zeros, so kept edges carry at least this cost (their distances: pruning's
-#: ``_MIN_DISTANCE``)
+#: sparse storage drops zeros, so kept edges carry at least this cost (their distances:
+#: :data:`~agents.search.graph.edges.MIN_WEIGHT`)
 _MIN_COST = 1e-12
 
 
@@ -246,17 +247,34 @@ class WaypointGraph:
         c_max: float = np.inf,
         positions: Optional[np.ndarray] = None,
     ) -> "WaypointGraph":
-        """The graph of dense ``D`` and ``C`` on the edges where the boolean ``keep`` is true.
+        """The graph of dense ``D`` and ``C`` on the edges where the boolean ``keep`` is true (no
+        self-loops).
 
         Zero weights are raised to a tiny positive value so that sparse storage keeps the edge.
         """
-        rows, cols = np.nonzero(keep)
-        n = D.shape[0]
+        return cls.from_edges(EdgeList.from_dense_mask(D, C, keep), None, observations, d_max, c_max, positions)
+
+    @classmethod
+    def from_edges(
+        cls,
+        edges: EdgeList,
+        keep: Optional[np.ndarray] = None,
+        observations: Optional[np.ndarray] = None,
+        d_max: float = 7.0,
+        c_max: float = np.inf,
+        positions: Optional[np.ndarray] = None,
+    ) -> "WaypointGraph":
+        """The graph of an :class:`~agents.search.graph.edges.EdgeList` (where the boolean array ``keep``
+        over its edges holds; default: all of them).
+
+        Zero weights are raised to a tiny positive value so that sparse storage keeps the edge.
+        """
+        m = slice(None) if keep is None else keep
+        rows, cols = edges.u[m], edges.v[m]
+        n = edges.n_nodes
         # store strictly positive values: a zero would vanish from the sparse structure
-        dvals = np.maximum(D[rows, cols], _MIN_DISTANCE)
-        cvals = np.maximum(C[rows, cols], _MIN_COST)
-        dist = sparse.csr_matrix((dvals, (rows, cols)), shape=(n, n))
-        cost = sparse.csr_matrix((cvals, (rows, cols)), shape=(n, n))
+        dist = sparse.csr_matrix((np.maximum(edges.d[m], MIN_WEIGHT), (rows, cols)), shape=(n, n))
+        cost = sparse.csr_matrix((np.maximum(edges.c[m], _MIN_COST), (rows, cols)), shape=(n, n))
         return cls(dist, cost, observations, float(d_max), float(c_max), positions)
 
     @classmethod
@@ -362,7 +380,7 @@ class WaypointGraph:
             keep = _short_and_cheap(d, cc, self.d_max, self.c_max)
             rows.append(np.broadcast_to(r, d.shape)[keep])
             cols.append(np.broadcast_to(c, d.shape)[keep])
-            dv.append(np.maximum(d[keep], _MIN_DISTANCE))
+            dv.append(np.maximum(d[keep], MIN_WEIGHT))
             cv.append(np.maximum(cc[keep], _MIN_COST))
 
         add(start_ids[:, None], np.arange(n)[None, :], d_from, c_from)
@@ -612,48 +630,38 @@ def attach_endpoints(
     return D2, C2, np.concatenate([observations, ends])
 
 
-def problem_edge_mask(D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float, c_max: float,
-                      endpoint_edges: int) -> np.ndarray:
-    """Edges of a problem graph (layout of :class:`ProblemGraph`) under cut-off ``c_max``.
+def problem_edge_mask(edges: EdgeList, n_buffer: int, c_max: float, endpoint_edges: int) -> np.ndarray:
+    """Which of a problem's candidate ``edges`` (:func:`~agents.search.graph.edges.problem_edges`) its
+    graph keeps under cut-off ``c_max``: a boolean array over them.
 
-    The rule of :func:`edge_mask`, plus: a start is only left (towards buffer nodes and its own
-    goal), a goal only entered, and every start keeps its ``endpoint_edges`` cheapest short
-    outgoing edges (every goal its cheapest incoming ones) whatever ``c_max``, so that an agent
-    that starts or ends in a costly place is not cut off.
+    The rule of :func:`edge_mask` (the candidates are short already), plus: every start keeps its
+    ``endpoint_edges`` cheapest outgoing edges to buffer nodes (every goal its cheapest incoming ones)
+    whatever ``c_max``, so that an agent that starts or ends in a costly place is not cut off.
     """
     n = n_buffer
-    k = (D.shape[0] - n) // 2
-    keep = _short_and_cheap(D, C, d_max, c_max)
-    starts = np.arange(n, n + k)
-    goals = np.arange(n + k, n + 2 * k)
-    keep[:, starts] = False
-    keep[goals, :] = False
-    keep[starts[:, None], goals[None, :]] = False
-    keep[starts, goals] = _short_and_cheap(D[starts, goals], C[starts, goals], d_max, c_max)
-    e = min(endpoint_edges, n)
-    short = D[starts, :n] < d_max
-    cheap = np.argsort(np.where(short, C[starts, :n], np.inf), axis=1)[:, :e]
-    rows = np.repeat(starts, e)
-    keep[rows, cheap.ravel()] |= short[np.repeat(np.arange(k), e), cheap.ravel()]
-    short_in = D[:n, goals] < d_max
-    cheap_in = np.argsort(np.where(short_in, C[:n, goals], np.inf), axis=0)[:e, :]
-    cols = np.tile(goals, e)
-    keep[cheap_in.ravel(), cols] |= short_in[cheap_in.ravel(), np.tile(np.arange(k), e)]
-    np.fill_diagonal(keep, False)
+    k = (edges.n_nodes - n) // 2
+    keep = edges.c < c_max
+    e = min(int(endpoint_edges), n)
+    if e > 0 and k:
+        from_start = (edges.u >= n) & (edges.u < n + k) & (edges.v < n)
+        keep |= from_start & (edges.ranks_within(edges.u, edges.c, from_start) < e)
+        into_goal = (edges.v >= n + k) & (edges.u < n)
+        keep |= into_goal & (edges.ranks_within(edges.v, edges.c, into_goal) < e)
     return keep
 
 
 def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn, places: np.ndarray,
                   slack: float, d_max: Optional[float] = None) -> np.ndarray:
-    """``(M, M)`` mask of the edges ``u -> v`` among ``observations`` (distances ``D``) that pass
-    one of ``places``: going through it is at most ``slack`` longer than the edge. An edge that
-    ends at such a place passes it too. ``d_max`` as for :func:`attach_endpoints`; with it, only
-    pairs closer than ``d_max`` (the edges a problem graph may hold) are marked."""
+    """The edges ``u -> v`` among ``observations`` (distances ``D``) that pass one of ``places``: going
+    through it is at most ``slack`` longer than the edge. An edge that ends at such a place passes it
+    too. ``(E, 2)`` node pairs, sorted. ``d_max`` as for :func:`attach_endpoints`; with it, only pairs
+    closer than ``d_max`` (the edges a problem graph may hold) are listed."""
     within = getattr(pairwise, "within", None)
     score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
     to_place, _ = score(observations, places)
     from_place, _ = score(places, observations)
-    out = np.zeros(D.shape, dtype=bool)
+    m = len(observations)
+    found = []
     # an edge (shorter than d_max) through a place comes within d_max + slack of it at both ends: only
     # the pairs of such nodes are compared
     limit = np.inf if d_max is None else float(d_max) + slack
@@ -662,14 +670,15 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
         vs = np.flatnonzero(from_place[j] < limit)
         if not (len(us) and len(vs)):
             continue
-        block = np.ix_(us, vs)
-        d = D[block]
+        d = np.asarray(D[np.ix_(us, vs)])
         through = to_place[us, j][:, None] + from_place[j, vs][None, :] <= d + slack
         if d_max is not None:
             through &= d < d_max
-        out[block] |= through
-    np.fill_diagonal(out, False)
-    return out
+        a, b = np.nonzero(through)
+        found.append(us[a].astype(np.int64) * m + vs[b])
+    keys = np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
+    pairs = np.stack([keys // m, keys % m], axis=1)
+    return pairs[pairs[:, 0] != pairs[:, 1]]
 
 
 def check_endpoints(observations: np.ndarray, starts: np.ndarray, goals: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -695,16 +704,17 @@ def build_problem_graph(
     detour: Optional[float] = None, second_opinion: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     detached: Optional[Sequence[int]] = None, goal_detached: Optional[Sequence[int]] = None,
     attached: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None, passing: Optional[np.ndarray] = None,
-    max_leg: Optional[float] = None, long_edges: Optional[np.ndarray] = None,
+    max_leg: Optional[float] = None, long_edges: Optional[np.ndarray] = None, edges: Optional[EdgeList] = None,
 ) -> ProblemGraph:
     """Attach ``starts`` and ``goals`` to the buffer graph, prune it and relax ``c_max`` where needed.
 
     The one pipeline from critic matrices to the graph a problem is searched on:
-    :func:`attach_endpoints`, :func:`problem_edge_mask`, then (with ``relax_cost``)
-    :func:`relax_cost_locally`. ``exclude`` lists buffer nodes (``0..N-1``) the graph must not
-    use (e.g. a waypoint an agent failed to reach), ``exclude_edges`` (``(E, 2)`` pairs of buffer
-    node ids) edges it must not use (e.g. edges agents failed to traverse); ``max_edges`` caps the
-    edges leaving each buffer node towards other buffer nodes at its that many shortest ones.
+    :func:`attach_endpoints`, :func:`~agents.search.graph.edges.problem_edges`, :func:`problem_edge_mask`,
+    then (with ``relax_cost``) :func:`~agents.search.graph.pruning.relax_cost_locally`. ``exclude`` lists
+    buffer nodes (``0..N-1``) the graph must not use (e.g. a waypoint an agent failed to reach),
+    ``exclude_edges`` (``(E, 2)`` pairs of buffer node ids) edges it must not use (e.g. edges agents
+    failed to traverse); ``max_edges`` caps the edges leaving each buffer node towards other buffer
+    nodes at its that many shortest ones.
     ``avoid`` (optional) holds observations of places no edge may pass (e.g. agents parked
     there): an edge ``u -> v`` is left out when going through one of them is at most
     ``avoid_slack`` longer, ``D[u, o] + D[o, v] <= D[u, v] + avoid_slack``. An agent whose shortest
@@ -722,7 +732,10 @@ def build_problem_graph(
     ``passing`` what :func:`passing_edges` returns for them and ``avoid``. ``max_leg``: no edge that
     ``second_opinion`` reads beyond this many steps is admitted; ``long_edges``: what
     :func:`~agents.search.graph.pruning.long_legs` returns for these endpoints and ``max_leg``, where
-    computed before (it reads every edge with the second critic).
+    computed before (it reads every edge with the second critic); ``edges``: what
+    :func:`~agents.search.graph.edges.problem_edges` returns for them, where computed before.
+    Every rule works on that list of the edges short enough to exist (:mod:`~agents.search.graph.edges`),
+    never on every pair of nodes.
     """
     n = len(observations)
     ex = np.unique(np.asarray([] if exclude is None else exclude, dtype=np.int64))
@@ -744,31 +757,28 @@ def build_problem_graph(
     if attached is None:
         attached = attach_endpoints(observations, D, C, pairwise, starts, goals, d_max)
     D2, C2, obs = attached
+    if edges is None:
+        edges = problem_edges(EdgeList.short(D, C, d_max), D2, C2, n, d_max)
     if max_leg is not None and math.isfinite(max_leg):
         if second_opinion is None:
             raise ValueError("max_leg needs a second_opinion to read the legs with")
         if long_edges is None:
-            long_edges = long_legs(D2, obs, n, d_max, second_opinion, max_leg)
+            long_edges = long_legs(edges, obs, n, second_opinion, max_leg)
         ee = np.concatenate([ee, long_edges])
-    keep = problem_edge_mask(D2, C2, n, d_max, c_max, endpoint_edges)
-    keep[ex, :] = False
-    keep[:, ex] = False
-    keep[ee[:, 0], ee[:, 1]] = False
     if avoid is not None and len(avoid):
         if passing is None:
             passing = passing_edges(D2, obs, pairwise, np.asarray(avoid, dtype=obs.dtype), avoid_slack, d_max)
-        keep[passing] = False
-        ee = np.concatenate([ee, np.argwhere(passing & (D2 < d_max))])
+        ee = np.concatenate([ee, passing])
+    allowed = admissible(edges, ex, ee)
+    keep = problem_edge_mask(edges, n, c_max, endpoint_edges) & allowed
     if max_edges is not None:
-        cap_out_edges(keep, D2, max_edges, n)
-    allowed = admissible(D2, n, d_max, ex, ee)
-    ok, c_used = relax_cost_locally(keep, D2, C2, n, d_max, c_max, ex, relax=relax_cost, exclude_edges=ee,
-                                    allowed=allowed)
+        cap_out_edges(keep, edges, max_edges, n)
+    ok, c_used = relax_cost_locally(keep, edges, n, c_max, allowed, relax=relax_cost)
     if cost_guard is not None and math.isfinite(c_max):
         confirm = None if second_opinion is None else (lambda u, v: second_opinion(obs[u], obs[v]))
-        admit_cheaper_routes(keep, D2, C2, n, d_max, ex, ee, factor=cost_guard, detour=detour, allowed=allowed,
+        admit_cheaper_routes(keep, edges, D2, C2, n, d_max, allowed, factor=cost_guard, detour=detour,
                              confirm=confirm)
-    graph = WaypointGraph.from_mask(D2, C2, keep, obs, d_max, c_used)
+    graph = WaypointGraph.from_edges(edges, keep, obs, d_max, c_used)
     return ProblemGraph(obs, D2, C2, graph, n, c_used, ok)
 
 

@@ -17,8 +17,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-#: sparse storage drops zeros, so kept edges carry at least this weight
-_MIN_DISTANCE = 1e-9
+from .edges import EdgeList
 
 #: ``confirm(u, v) -> distances``: a second critic's predicted steps along the edges ``u[i] -> v[i]`` (node ids)
 ConfirmFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -31,46 +30,40 @@ def read_pairs(read: ConfirmFn, observations: np.ndarray, pairs: np.ndarray, bat
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def long_legs(D: np.ndarray, observations: np.ndarray, n_buffer: int, d_max: float, read: ConfirmFn,
-              max_leg: float, buffer_long: Optional[np.ndarray] = None) -> np.ndarray:
-    """The admissible edges (:func:`admissible`) that ``read`` (a second critic: the driver's) puts
-    beyond ``max_leg`` steps, as ``(E, 2)`` node pairs.
+def long_legs(edges: EdgeList, observations: np.ndarray, n_buffer: int, read: ConfirmFn, max_leg: float,
+              buffer_long: Optional[np.ndarray] = None) -> np.ndarray:
+    """The edges of ``edges`` (a problem's :func:`~agents.search.graph.edges.problem_edges`, or a buffer's
+    short edges) that ``read`` (a second critic: the driver's) puts beyond ``max_leg`` steps, as
+    ``(E, 2)`` node pairs.
 
     A driver that reads a leg that long hands it to its fallback policy at once (the controller's
     ``fallback_beyond``), so a plan that holds it drives it the costly way. ``buffer_long``: those
     between buffer nodes, where the caller has them (they are read once per graph: about 8 s for
     Apartment3's 61,245 edges on one core); then only the edges of the starts and goals are read.
     """
-    pairs = admissible(D, n_buffer, d_max)
-    if buffer_long is not None:
-        pairs[:n_buffer, :n_buffer] = False
-    pairs = np.argwhere(pairs)
+    ask = None if buffer_long is None else ~((edges.u < n_buffer) & (edges.v < n_buffer))
+    pairs = edges.pairs(ask)
     found = pairs[read_pairs(read, observations, pairs) > max_leg]
     if buffer_long is None:
         return found.astype(np.int64)
     return np.concatenate([np.asarray(buffer_long, dtype=np.int64).reshape(-1, 2), found]).astype(np.int64)
 
 
-def admissible(D: np.ndarray, n_buffer: int, d_max: float, exclude: Optional[np.ndarray] = None,
-                exclude_edges: Optional[np.ndarray] = None) -> np.ndarray:
-    """Every edge a problem graph may hold whatever the cost
-    cut-off: short, a start only left and a goal only entered, none at ``exclude`` (buffer nodes)
-    and none of ``exclude_edges`` (``(E, 2)`` node pairs)."""
-    n = n_buffer
-    k = (D.shape[0] - n) // 2
-    s_ids = np.arange(n, n + k)
-    short = D < d_max
-    np.fill_diagonal(short, False)
-    short[:, n:n + k] = False
-    short[n + k:, :] = False
-    short[n:n + k, n + k:] = False
-    short[s_ids, s_ids + k] = D[s_ids, s_ids + k] < d_max
+def admissible(edges: EdgeList, exclude: Optional[np.ndarray] = None,
+               exclude_edges: Optional[np.ndarray] = None) -> np.ndarray:
+    """Which of a problem's candidate ``edges`` (:func:`~agents.search.graph.edges.problem_edges`: every
+    edge it may hold whatever the cost cut-off) are allowed: none at ``exclude`` (buffer nodes) and none
+    of ``exclude_edges`` (``(E, 2)`` node pairs). A boolean array over the edges."""
+    ok = np.ones(len(edges), bool)
     if exclude is not None and len(exclude):
-        short[exclude, :] = False
-        short[:, exclude] = False
+        bad = np.zeros(edges.n_nodes, bool)
+        bad[np.asarray(exclude, np.int64)] = True
+        ok &= ~bad[edges.u] & ~bad[edges.v]
     if exclude_edges is not None and len(exclude_edges):
-        short[exclude_edges[:, 0], exclude_edges[:, 1]] = False
-    return short
+        ee = np.asarray(exclude_edges, np.int64).reshape(-1, 2)
+        at = edges.find(ee[:, 0], ee[:, 1])
+        ok[at[at >= 0]] = False
+    return ok
 
 
 def route_from_predecessors(pred: np.ndarray, source: int, target: int) -> List[int]:
@@ -82,13 +75,11 @@ def route_from_predecessors(pred: np.ndarray, source: int, target: int) -> List[
     return nodes[::-1]
 
 
-def shortest_routes(keep: np.ndarray, D: np.ndarray, sources: np.ndarray,
+def shortest_routes(edges: EdgeList, mask: Optional[np.ndarray], sources: np.ndarray,
                     targets: np.ndarray) -> List[Optional[List[int]]]:
-    """The shortest route (by ``D``, over the edges where ``keep`` is true) from each of ``sources`` to
-    the target beside it, as node ids from source to target; ``None`` where there is none."""
-    rows, cols = np.nonzero(keep)
-    g = sparse.csr_matrix((np.maximum(D[rows, cols], _MIN_DISTANCE), (rows, cols)), shape=D.shape)
-    dist, pred = dijkstra(g, directed=True, indices=sources, return_predecessors=True)
+    """The shortest route (by predicted distance, over the ``edges`` where ``mask`` holds; ``None``: all) from each of
+    ``sources`` to the target beside it, as node ids from source to target; ``None`` where there is none."""
+    dist, pred = dijkstra(edges.matrix(mask), directed=True, indices=sources, return_predecessors=True)
     out: List[Optional[List[int]]] = []
     for i, t in enumerate(targets):
         if not np.isfinite(dist[i, t]):
@@ -131,13 +122,14 @@ def trusted_edges(route: List[int], D: np.ndarray, C: np.ndarray, hops: sparse.c
     return cheap & corroborated
 
 
-def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
-                         exclude: Optional[np.ndarray] = None, exclude_edges: Optional[np.ndarray] = None,
-                         factor: float = 2.0, corroboration: float = 2.0, detour: Optional[float] = None,
-                         allowed: Optional[np.ndarray] = None, confirm: Optional[ConfirmFn] = None) -> np.ndarray:
-    """Admit (edit ``keep``) each agent's shortest route over every admissible edge where the cost
-    cut-off made its shortest route more than ``factor`` times as costly by the critic, or (``detour``,
-    ``None``: off) more than that many times as long and costlier at all.
+def admit_cheaper_routes(keep: np.ndarray, edges: EdgeList, D: np.ndarray, C: np.ndarray, n_buffer: int,
+                         d_max: float, allowed: Optional[np.ndarray] = None, factor: float = 2.0,
+                         corroboration: float = 2.0, detour: Optional[float] = None,
+                         confirm: Optional[ConfirmFn] = None) -> np.ndarray:
+    """Admit (edit ``keep``, a mask over the problem's candidate ``edges``) each agent's shortest route
+    over every ``allowed`` edge (:func:`admissible`; default: all) where the cost cut-off made its
+    shortest route more than ``factor`` times as costly by the critic, or (``detour``, ``None``: off)
+    more than that many times as long and costlier at all.
 
     Pruning costly edges is meant to lower an agent's cost; a cut-off that leaves only a long
     detour of cheap edges can make the route's predicted cost (the sum of ``C`` over its edges)
@@ -146,18 +138,18 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
     paying: the cut-off also keeps out edges the critic misjudges (a hop through a wall reads
     costly), and short hops are driven more reliably. A detour that is both longer and costlier
     buys nothing. The plain route is admitted only where :func:`trusted_edges` trusts every edge
-    of it (``corroboration``: its chain factor; ``confirm``: its second critic). Returns which agents
-    got their plain shortest route admitted. ``allowed``: :func:`admissible` of the same arguments,
-    where the caller has it already.
+    of it (``corroboration``: its chain factor; ``confirm``: its second critic; ``D`` and ``C``: the
+    problem's matrices, read along routes). Returns which agents got their plain shortest route
+    admitted.
     """
     n = n_buffer
-    k = (D.shape[0] - n) // 2
+    k = (edges.n_nodes - n) // 2
     s_ids, g_ids = np.arange(n, n + k), np.arange(n + k, n + 2 * k)
     admitted = np.zeros(k, dtype=bool)
     if allowed is None:
-        allowed = admissible(D, n, d_max, exclude, exclude_edges)
-    plain = shortest_routes(allowed, D, s_ids, g_ids)
-    pruned = shortest_routes(keep, D, s_ids, g_ids)
+        allowed = np.ones(len(edges), bool)
+    plain = shortest_routes(edges, allowed, s_ids, g_ids)
+    pruned = shortest_routes(edges, keep, s_ids, g_ids)
     hops = None
 
     def totals(route: List[int]) -> Tuple[float, float]:  # (length, cost) by the critic
@@ -171,52 +163,47 @@ def admit_cheaper_routes(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffe
         if not (c_q > factor * c_p or roundabout):
             continue
         if hops is None:
-            rows, cols = np.nonzero(allowed & (D < d_max / 2))
-            hops = sparse.csr_matrix((np.maximum(D[rows, cols], _MIN_DISTANCE), (rows, cols)), shape=D.shape)
+            hops = edges.matrix(allowed & (edges.d < d_max / 2))
         if trusted_edges(p, D, C, hops, d_max, corroboration, confirm=confirm).all():
-            keep[p[:-1], p[1:]] = True
+            keep[edges.find(p[:-1], p[1:])] = True
             admitted[i] = True
     return admitted
 
 
-def relax_cost_locally(keep: np.ndarray, D: np.ndarray, C: np.ndarray, n_buffer: int, d_max: float,
-                       c_max: float, exclude: Optional[np.ndarray] = None,
-                       relax: bool = True, exclude_edges: Optional[np.ndarray] = None,
-                       allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
-    """Relax the cost cut-off around agents without a path until every goal is reachable (edits ``keep``).
+def relax_cost_locally(keep: np.ndarray, edges: EdgeList, n_buffer: int, c_max: float,
+                       allowed: Optional[np.ndarray] = None, relax: bool = True) -> Tuple[np.ndarray, float]:
+    """Relax the cost cut-off around agents without a path until every goal is reachable (edits ``keep``,
+    a mask over the problem's candidate ``edges``).
 
-    For an agent without a path, the edges leaving the region its start reaches (and the edges
-    entering the region that reaches its goal) are admitted up to twice the cut-off, then four
-    times, ...; the rest of the graph keeps ``c_max``. ``exclude`` lists buffer nodes that
-    never gain an edge, ``exclude_edges`` (``(E, 2)`` node pairs) edges never admitted.
-    Returns ``(connected, c)``: which agents have a path, and the largest cut-off used
-    (``c_max`` itself when nothing was relaxed, or when ``relax`` is false). ``allowed``:
-    :func:`admissible` of the same arguments, where the caller has it already.
+    For an agent without a path, the ``allowed`` edges (:func:`admissible`; default: all) leaving the
+    region its start reaches (and those entering the region that reaches its goal) are admitted up to
+    twice the cut-off, then four times, ...; the rest of the graph keeps ``c_max``. Returns
+    ``(connected, c)``: which agents have a path, and the largest cut-off used (``c_max`` itself when
+    nothing was relaxed, or when ``relax`` is false).
     """
     n = n_buffer
-    k = (D.shape[0] - n) // 2
+    k = (edges.n_nodes - n) // 2
     s_ids = np.arange(n, n + k)
     g_ids = np.arange(n + k, n + 2 * k)
     c = float(c_max)
-    short: Optional[np.ndarray] = allowed
-    c_top: Optional[float] = None  # the costliest admissible edge: no relaxation goes beyond it
+    short = np.ones(len(edges), bool) if allowed is None else allowed
+    c_top: Optional[float] = None  # the costliest allowed edge: no relaxation goes beyond it
     while True:
-        g = sparse.csr_matrix(keep)
+        g = edges.matrix(keep, "one")
         fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
         ok = fwd[np.arange(k), g_ids]
         if ok.all() or not relax or not math.isfinite(c):
             return ok, c
-        if short is None:
-            short = admissible(D, n_buffer, d_max, exclude, exclude_edges)
         if c_top is None:
-            c_top = float(C[short].max()) if short.any() else 0.0
+            c_top = float(edges.c[short].max()) if short.any() else 0.0
         if c > c_top:
             return ok, c
         c *= 2.0
         bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
+        cheap = short & (edges.c < c)
         for i in np.flatnonzero(~ok):
-            keep[fwd[i][:, None] & short & (C < c)] = True
-            keep[short & (C < c) & bwd[i][None, :]] = True
+            keep |= cheap & fwd[i][edges.u]
+            keep |= cheap & bwd[i][edges.v]
 
 
 __all__ = ["ConfirmFn", "admissible", "admit_cheaper_routes", "long_legs", "read_pairs",

@@ -14,6 +14,8 @@ from typing import Optional
 
 import numpy as np
 
+from .edges import EdgeList
+
 
 def two_way_consistent(D: np.ndarray, tau: float, order: Optional[np.ndarray] = None) -> np.ndarray:
     """Indices of the nodes kept by two-way consistency merging (sorted).
@@ -47,18 +49,15 @@ def two_way_consistent(D: np.ndarray, tau: float, order: Optional[np.ndarray] = 
     return np.flatnonzero(kept)
 
 
-def cap_out_edges(keep: np.ndarray, D: np.ndarray, k: int, n_buffer: Optional[int] = None) -> np.ndarray:
-    """Keep at most ``k`` outgoing edges per buffer node (the ``k`` shortest by ``D``) in the edge mask
-    ``keep`` (edited and returned); edges from and to the first ``n_buffer`` nodes only are capped."""
+def cap_out_edges(keep: np.ndarray, edges: EdgeList, k: int, n_buffer: Optional[int] = None) -> np.ndarray:
+    """Keep at most ``k`` outgoing edges per buffer node (the ``k`` shortest by predicted distance, ties
+    to the lower target id) in ``keep``, a mask over ``edges`` (edited and returned); edges from and to
+    the first ``n_buffer`` nodes only are capped (default: all)."""
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k!r}")
-    n = len(keep) if n_buffer is None else int(n_buffer)
-    sub = keep[:n, :n]
-    if k < n:
-        shortest = np.argsort(np.where(sub, D[:n, :n], np.inf), axis=1, kind="stable")[:, :k]
-        allowed = np.zeros_like(sub)
-        allowed[np.arange(n)[:, None], shortest] = True
-        keep[:n, :n] = sub & allowed
+    n = edges.n_nodes if n_buffer is None else int(n_buffer)
+    sub = keep & (edges.u < n) & (edges.v < n)
+    keep &= ~sub | (edges.ranks_within(edges.u, edges.d, sub) < k)
     return keep
 
 
