@@ -54,6 +54,7 @@ from .graph.build import (
     build_problem_graph,
     check_endpoints,
     passing_edges,
+    place_distances,
 )
 from .graph.edges import EdgeList, problem_edges
 from .graph.pruning import long_legs, route_from_predecessors
@@ -267,6 +268,8 @@ class BufferPlanner:
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
+        #: the buffer nodes' distances to and from the last places to avoid (they outlive the endpoints)
+        self._places: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray]]] = None
         #: the buffer's edges shorter than d_max, by d_max (shared by the planners over the same matrices), and
         #: the candidate edges of the last endpoints attached
         self._short: Dict[float, EdgeList] = {}
@@ -384,7 +387,11 @@ class BufferPlanner:
             k2 = (key, at.shape, at.tobytes())
             if self._passing is None or self._passing[0] != k2:
                 D2, _, obs = self._attached[1]
-                self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, g.proximity_radius or 0, g.d_max))
+                places = (at.shape, at.tobytes(), g.d_max)
+                if self._places is None or self._places[0] != places:
+                    self._places = (places, place_distances(self.pairwise, self.observations, at, g.d_max))
+                self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, g.proximity_radius or 0, g.d_max,
+                                                   known=self._places[1]))
             passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=g.d_max, c_max=g.c_max, endpoint_edges=g.endpoint_edges,

@@ -88,3 +88,36 @@ def test_attaching_new_endpoints_writes_over_the_last_matrices_only_where_nothin
     np.testing.assert_array_equal(again.problem.D, fresh.problem.D)
     np.testing.assert_array_equal(again.problem.C, fresh.problem.C)
     assert again.nodes == fresh.nodes and again.soc == fresh.soc
+
+
+def test_replans_around_the_same_parked_agents_score_the_buffer_against_them_once():
+    """The buffer nodes' distances to the places to avoid are kept from one replan to the next (only the new
+    start's and goal's are scored), and the graphs are those of a planner that scores everything anew."""
+    from test_planner import euclid_pairwise, grid_points
+
+    from agents.search import BufferPlanner
+
+    pts = grid_points(12)
+    pairwise = euclid_pairwise()
+    scored = []
+
+    def counting(a, b):
+        scored.append(len(a) * len(b))
+        return pairwise(a, b)
+
+    D, C = pairwise(pts, pts)
+    planner = BufferPlanner(pts, D, C, counting).with_options(d_max=2.5, proximity_radius=0.5)
+    parked = pts[[30, 31, 77]] + 0.05
+    for k, (s, g) in enumerate([(0, 50), (3, 70), (5, 90)]):
+        scored.clear()
+        plan = planner.plan(pts[[s]] + 0.1, pts[[g]] + 0.1, avoid=parked)
+        # attaching: 2 endpoints against the buffer and each other; places: the buffer only the first time
+        endpoints = 2 * (2 * len(pts)) + 4
+        assert sum(scored) == endpoints + 2 * 2 * len(parked) + (2 * len(pts) * len(parked) if k == 0 else 0)
+        fresh = BufferPlanner(pts, D, C, pairwise).with_options(d_max=2.5, proximity_radius=0.5)
+        again = fresh.plan(pts[[s]] + 0.1, pts[[g]] + 0.1, avoid=parked)
+        assert plan.solved and plan.nodes == again.nodes and plan.soc == again.soc
+        assert (plan.problem.graph.distance != again.problem.graph.distance).nnz == 0
+    scored.clear()
+    planner.plan(pts[[7]] + 0.1, pts[[60]] + 0.1, avoid=parked[:2])  # other places: the buffer is scored again
+    assert sum(scored) == 2 * (2 * len(pts)) + 4 + 2 * 2 * 2 + 2 * len(pts) * 2

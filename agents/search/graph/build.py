@@ -650,16 +650,29 @@ def problem_edge_mask(edges: EdgeList, n_buffer: int, c_max: float, endpoint_edg
     return keep
 
 
+def place_distances(pairwise: PairwiseFn, observations: np.ndarray, places: np.ndarray,
+                    d_max: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """``(to_place, from_place)``: the predicted distances from every observation to every place ``(N, P)``
+    and back ``(P, N)`` (``d_max`` as for :func:`attach_endpoints`)."""
+    within = getattr(pairwise, "within", None)
+    score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
+    return score(observations, places)[0], score(places, observations)[0]
+
+
 def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn, places: np.ndarray,
-                  slack: float, d_max: Optional[float] = None) -> np.ndarray:
+                  slack: float, d_max: Optional[float] = None,
+                  known: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> np.ndarray:
     """The edges ``u -> v`` among ``observations`` (distances ``D``) that pass one of ``places``: going
     through it is at most ``slack`` longer than the edge. An edge that ends at such a place passes it
     too. ``(E, 2)`` node pairs, sorted. ``d_max`` as for :func:`attach_endpoints`; with it, only pairs
-    closer than ``d_max`` (the edges a problem graph may hold) are listed."""
-    within = getattr(pairwise, "within", None)
-    score = pairwise if d_max is None or within is None else functools.partial(within, d_max=float(d_max))
-    to_place, _ = score(observations, places)
-    from_place, _ = score(places, observations)
+    closer than ``d_max`` (the edges a problem graph may hold) are listed. ``known``: what
+    :func:`place_distances` gives for the first observations (a buffer's, whose distances to parked
+    agents do not change from one replan to the next); only the others are scored."""
+    have = 0 if known is None else len(known[0])
+    to_place, from_place = place_distances(pairwise, observations[have:], places, d_max)
+    if known is not None:
+        to_place = np.concatenate([known[0], to_place], axis=0)
+        from_place = np.concatenate([known[1], from_place], axis=1)
     m = len(observations)
     found = []
     # an edge (shorter than d_max) through a place comes within d_max + slack of it at both ends: only
@@ -784,4 +797,5 @@ def build_problem_graph(
 
 __all__ = ["BorderedMatrix", "NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints",
            "build_problem_graph", "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges",
+           "place_distances",
            "problem_edge_mask"]
