@@ -101,6 +101,27 @@ def test_cost_cutoff_is_relaxed_until_every_agent_has_a_path():
         strict.agent_plans()
 
 
+def test_a_costly_stretch_many_edges_wide_is_relaxed_across():
+    """Nodes on a line, neighbours linked; six costly edges in a row between start and goal. Doubling the
+    cut-off widens the regions by one edge a round: it passes the costliest edge after four rounds, and the
+    regions go on growing at that cut-off until they meet."""
+    from agents.search.graph.edges import EdgeList, problem_edges
+    from agents.search.graph.pruning import relax_cost_locally
+
+    x = np.r_[np.arange(10.0), -1.0, 10.0]  # buffer nodes 0..9, the start at -1, the goal at 10
+    D = np.abs(x[:, None] - x[None, :])
+    mid = (x >= 2) & (x <= 8)
+    C = np.where(mid[:, None] & mid[None, :], 10.0, 0.5)  # the edges among nodes 2..8 cost 10
+    edges = problem_edges(EdgeList.short(D[:10, :10], C[:10, :10], 1.5), D, C, 10, 1.5)
+    keep = edges.c < 1.0
+    ok, c = relax_cost_locally(keep, edges, 10, 1.0)
+    assert ok.tolist() == [True] and c == 16.0
+    crossing = edges.dense(keep)
+    assert all(crossing[i, i + 1] for i in range(9)) and crossing[10, 0] and crossing[9, 11]
+    ok, c = relax_cost_locally(edges.c < 1.0, edges, 10, 1.0, relax=False)
+    assert ok.tolist() == [False] and c == 1.0
+
+
 def test_risk_budget_bounds_the_route_cost():
     pts = grid_points(9)
     pw = euclid_pairwise(hot=(4.0, 4.0), hot_radius=2.5)

@@ -177,9 +177,11 @@ def relax_cost_locally(keep: np.ndarray, edges: EdgeList, n_buffer: int, c_max: 
 
     For an agent without a path, the ``allowed`` edges (:func:`admissible`; default: all) leaving the
     region its start reaches (and those entering the region that reaches its goal) are admitted up to
-    twice the cut-off, then four times, ...; the rest of the graph keeps ``c_max``. Returns
-    ``(connected, c)``: which agents have a path, and the largest cut-off used (``c_max`` itself when
-    nothing was relaxed, or when ``relax`` is false).
+    twice the cut-off, then four times, ...; the rest of the graph keeps ``c_max``. Each round widens
+    both regions by one edge; once the cut-off passes the costliest allowed edge, the rounds go on
+    without raising it while the regions still grow, so that a costly stretch many edges wide is
+    crossed too. Returns ``(connected, c)``: which agents have a path, and the largest cut-off used
+    (``c_max`` itself when nothing was relaxed, or when ``relax`` is false).
     """
     n = n_buffer
     k = (edges.n_nodes - n) // 2
@@ -187,7 +189,8 @@ def relax_cost_locally(keep: np.ndarray, edges: EdgeList, n_buffer: int, c_max: 
     g_ids = np.arange(n + k, n + 2 * k)
     c = float(c_max)
     short = np.ones(len(edges), bool) if allowed is None else allowed
-    c_top: Optional[float] = None  # the costliest allowed edge: no relaxation goes beyond it
+    c_top: Optional[float] = None  # the costliest allowed edge: no cut-off beyond it prunes anything
+    grew = True
     while True:
         g = edges.matrix(keep, "one")
         fwd = np.isfinite(dijkstra(g, directed=True, indices=s_ids, unweighted=True))
@@ -196,14 +199,17 @@ def relax_cost_locally(keep: np.ndarray, edges: EdgeList, n_buffer: int, c_max: 
             return ok, c
         if c_top is None:
             c_top = float(edges.c[short].max()) if short.any() else 0.0
-        if c > c_top:
+        if c > c_top and not grew:
             return ok, c
-        c *= 2.0
+        if c <= c_top:
+            c *= 2.0
         bwd = np.isfinite(dijkstra(g.T.tocsr(), directed=True, indices=g_ids, unweighted=True))
         cheap = short & (edges.c < c)
+        kept = int(keep.sum())
         for i in np.flatnonzero(~ok):
             keep |= cheap & fwd[i][edges.u]
             keep |= cheap & bwd[i][edges.v]
+        grew = int(keep.sum()) > kept
 
 
 __all__ = ["ConfirmFn", "admissible", "admit_cheaper_routes", "long_legs", "read_pairs",
