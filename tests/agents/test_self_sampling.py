@@ -211,3 +211,42 @@ def test_narrow_fraction_adds_unscored_passage_crossings():
     assert np.sum(gaps >= 4 * env.unwrapped.action_scale - 1e-9) >= 10  # the crossings, besides 10 scored short ones
     with pytest.raises(ValueError, match="narrow_fraction"):
         SelfSampler(narrow_fraction=1.5)
+
+
+def test_chained_episodes_start_where_the_last_one_left_the_agent(env):
+    critic = ChebyshevCritic()
+    sampler = SelfSampler(n_candidates=2000, n_keep=20, target_distance=6.0, chain_fraction=1.0, seed=0)
+    sampler.bind(critic)
+    wrapped = ProblemResetWrapper(env, sampler)
+    wrapped.reset(seed=0)  # the first episode: the agent stands nowhere yet, so a refill's problem
+    assert sampler.n_chained == 0 and sampler.n_refills == 1
+    for _ in range(3):
+        wrapped.step(np.array([1.0, 0.5], np.float32))
+    end = env.unwrapped.position
+    for k in range(1, 4):
+        obs, _ = wrapped.reset()
+        assert sampler.n_chained == k and sampler.n_refills == 1
+        np.testing.assert_allclose(env.unwrapped.position, end)  # the next leg starts where the last ended
+        assert abs(np.abs(obs["observation"] - obs["desired_goal"]).max() * critic.size - 6.0) < 1.5
+        wrapped.step(np.array([-0.5, 1.0], np.float32))
+        end = env.unwrapped.position
+    assert sampler.stats["sampler/chained"] == 3.0
+    half = SelfSampler(n_candidates=200, n_keep=20, chain_fraction=0.5, seed=0)
+    half.bind(critic)
+    w2 = ProblemResetWrapper(gym.make("SafeCentralObstacle-v0"), half)
+    for _ in range(40):
+        w2.reset()
+        w2.step(np.zeros(2, np.float32))
+    assert 10 <= half.n_chained <= 30 and half.n_refills >= 1
+    with pytest.raises(ValueError, match="chain_fraction"):
+        SelfSampler(chain_fraction=-0.1)
+
+
+def test_chain_fraction_is_a_self_sampler_setting():
+    from agents.training import TrainConfig
+
+    with pytest.raises(ValueError, match="chain_fraction is a self-sampler"):
+        TrainConfig(sampler="uniform", chain_fraction=0.5).validate()
+    with pytest.raises(ValueError, match="chain_fraction must be in"):
+        TrainConfig(chain_fraction=2.0).validate()
+    TrainConfig(chain_fraction=0.5).validate()
