@@ -4,9 +4,9 @@ Reads the ``runs.csv`` of ``safe-mapf evaluate`` output folders (one per environ
 the folder's name), prints one Markdown table per folder and draws one figure: per agent count,
 CSR (the share of runs in which every agent arrived), ISR (the mean share of agents arrived),
 the sum of costs per agent and the makespan (POGEMA's definitions: an agent that never arrives
-counts the run's length), and our largest cumulative safety cost over agents, the contacts
+counts the run's length), our largest cumulative safety cost over agents, the contacts
 between agents and the safety rate (the share of agents that never touched another; means over
-all runs). The figures of ``docs/many_agents.md`` come from::
+all runs), and the median time of the first plan. The figures of ``docs/many_agents.md`` come from::
 
     safe-mapf evaluate --agents 1 5 10 20 50 100 200 --problems 10 --difficulty hard --methods ours \\
         --no-figure --out examples/many_agents/central_obstacle
@@ -80,7 +80,7 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
     for name, rows in named.items():
         k = np.array([a["agents"] for a in rows])
         line, = axes[0].plot(k, [100 * a["isr"] for a in rows], "o-", label=f"{name}: ISR")
@@ -94,7 +94,9 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
                      label=f"{name}: max cumulative cost")
         axes[2].plot(k, [a["contacts_all_mean"] for a in rows], "s--", color=line.get_color(),
                      label=f"{name}: contacts")
-    titles = ["agents arrived, agents never touched (%)", "steps", "per run (mean)"]
+        axes[3].plot(k, [a["planning_time_median"] for a in rows], "o-", color=line.get_color(),
+                     label=f"{name}: first plan")
+    titles = ["agents arrived, agents never touched (%)", "steps", "per run (mean)", "planning time (s, median)"]
     ticks = sorted({a["agents"] for rows in named.values() for a in rows})
     for ax, title in zip(axes, titles):
         ax.set_xscale("log")
@@ -107,6 +109,7 @@ def figure(named: Dict[str, List[Dict[str, Any]]], path: Path) -> None:
     axes[0].set_ylim(0, 105)
     axes[2].set_yscale("symlog", linthresh=1.0)
     axes[2].set_ylim(bottom=0)
+    axes[3].set_yscale("log")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
