@@ -137,10 +137,6 @@ class SelfSampler(ProblemSampler):
             (0: the paper's sampler).
         narrow_reach: band of distances (in steps of the agent at full speed) of start and goal
             from the passage.
-        chain_fraction: share of the episodes that start where the last one left the agent (by its
-            goal, or wherever it was stuck when time ran out), as the next leg of a route does, with
-            the goal the critics score best among ``n_candidates // 10`` (at least 10) drawn for that
-            start; the others come from the refills (0: the paper's sampler).
     """
 
     name = "self"
@@ -157,12 +153,9 @@ class SelfSampler(ProblemSampler):
         seed: Optional[int] = None,
         narrow_fraction: float = 0.0,
         narrow_reach: Band = (2.0, 6.0),
-        chain_fraction: float = 0.0,
     ) -> None:
         if not 0.0 <= narrow_fraction <= 1.0:
             raise ValueError(f"narrow_fraction must be in [0, 1], got {narrow_fraction!r}")
-        if not 0.0 <= chain_fraction <= 1.0:
-            raise ValueError(f"chain_fraction must be in [0, 1], got {chain_fraction!r}")
         if int(n_candidates) < 1 or int(n_keep) < 1 or int(n_keep) > int(n_candidates):
             raise ValueError(f"need 1 <= n_keep <= n_candidates, got n_keep={n_keep}, n_candidates={n_candidates}")
         if not 0.0 <= cost_fraction <= 1.0:
@@ -177,9 +170,6 @@ class SelfSampler(ProblemSampler):
         self.disagreement_weight = float(disagreement_weight)
         self.narrow_fraction = float(narrow_fraction)
         self.narrow_reach = _check_band(narrow_reach, "narrow_reach")
-        self.chain_fraction = float(chain_fraction)
-        self.n_chained = 0
-        self._started: set = set()  # the envs (ids) that ran an episode of this sampler's
         self.aggregate = aggregate
         self.rng = np.random.default_rng(seed)
         self._seeded = seed is not None
@@ -256,33 +246,7 @@ class SelfSampler(ProblemSampler):
             self._stats = {"sampler/pred_distance": float(self.last_distance[chosen].mean()),
                            "sampler/pred_cost": float(self.last_cost[chosen].mean())}
 
-    def chained(self, env: gym.Env) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-        """A problem that starts where the env's agent stands now (the end of its last episode), with the
-        goal the critics score best among ``n_candidates // 10`` random ones; ``None`` where the agent
-        stands nowhere yet (before its first episode) or off the free space."""
-        u: Any = env.unwrapped
-        position = getattr(u, "position", None)
-        if position is None or id(u) not in self._started:
-            return None
-        start = np.asarray(position, dtype=np.float64)
-        scenario = getattr(u, "scenario", None)
-        if scenario is None or not bool(np.asarray(scenario.is_free(start[None]))[0]):
-            return None
-        goals = np.asarray(u.sample_states(max(10, self.n_candidates // 10), self.rng))
-        starts = np.repeat(start[None], len(goals), axis=0)
-        by_distance, by_cost = self.score(observations_at(env, starts), observations_at(env, goals))
-        scores = by_cost if by_cost is not None and self.rng.random() < self.cost_fraction else by_distance
-        best = int(np.argmin(scores))
-        return start, goals[best]
-
     def reset_options(self, env: gym.Env) -> Optional[Dict[str, Any]]:
-        if self.chain_fraction > 0:
-            if self.rng.random() < self.chain_fraction:
-                problem = self.chained(env)
-                if problem is not None:
-                    self.n_chained += 1
-                    return {"start": problem[0], "goal": problem[1]}
-            self._started.add(id(env.unwrapped))  # its next reset follows an episode of this sampler's
         if not self._pool:
             self.refill(env)
         start, goal = self._pool.pop()
@@ -290,10 +254,7 @@ class SelfSampler(ProblemSampler):
 
     @property
     def stats(self) -> Dict[str, float]:
-        out = dict(self._stats, **{"sampler/refills": float(self.n_refills)})
-        if self.chain_fraction > 0:
-            out["sampler/chained"] = float(self.n_chained)
-        return out
+        return dict(self._stats, **{"sampler/refills": float(self.n_refills)})
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()

@@ -62,8 +62,6 @@ class TrainConfig:
     """self-sampling: bonus per unit of ensemble disagreement"""
     narrow_fraction: float = 0.0
     """self-sampling: share of each refill's problems that cross a narrow passage, not scored by the critic"""
-    chain_fraction: float = 0.0
-    """self-sampling: share of the episodes that start where the last one left the agent, as a route's next leg"""
     parked_agents: int = 0
     """other agents standing still on the way of each training episode (the env's ``parked_agents``)"""
     parked_fraction: float = 1.0
@@ -173,10 +171,6 @@ class TrainConfig:
             raise ValueError(f"parked_fraction must be in [0, 1], got {self.parked_fraction!r}")
         if self.narrow_fraction > 0 and self.sampler != "self":
             raise ValueError("narrow_fraction shapes the self-sampler's candidates: use it with sampler 'self'")
-        if not 0.0 <= self.chain_fraction <= 1.0:
-            raise ValueError(f"chain_fraction must be in [0, 1], got {self.chain_fraction!r}")
-        if self.chain_fraction > 0 and self.sampler != "self":
-            raise ValueError("chain_fraction is a self-sampler's choice of goals: use it with sampler 'self'")
         if self.eval_freq < 1:
             raise ValueError(f"eval_freq must be >= 1, got {self.eval_freq}")
         if self.conv_layers is not None:
@@ -234,7 +228,7 @@ def _sampler_kwargs(cfg: TrainConfig) -> Dict[str, Any]:
                     target_cost=None if cfg.target_cost is None else tuple(cfg.target_cost),
                     cost_fraction=cfg.cost_fraction,
                     disagreement_weight=cfg.disagreement_weight, seed=cfg.seed,
-                    narrow_fraction=cfg.narrow_fraction, chain_fraction=cfg.chain_fraction)
+                    narrow_fraction=cfg.narrow_fraction)
     if cfg.sampler == "oracle":
         return dict(band=tuple(cfg.oracle_band))
     if cfg.sampler == "uniform":

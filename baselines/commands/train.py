@@ -50,9 +50,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--narrow-fraction", type=float, default=d.narrow_fraction,
                    help="self-sampling: share of each refill's problems that cross a narrow passage (doorway, "
                         "corridor; start and goal on either side), kept without scoring by the critic")
-    g.add_argument("--chain-fraction", type=float, default=d.chain_fraction, metavar="F",
-                   help="self-sampling: share of the episodes that start where the last one left the agent (by "
-                        "its goal, or where it got stuck), the goal scored by the critic, as a route's next leg")
     g.add_argument("--parked-agents", type=int, default=d.parked_agents, metavar="M",
                    help="other agents standing still near the straight line of each training episode, seen in "
                         "the panoramas and in the way (default 0)")
