@@ -208,6 +208,41 @@ def test_walls_stop_what_the_layer_plans_with():
     np.testing.assert_allclose(slid, [[0.0, 0.5], [-1.0, 0.5]])
 
 
+def _followed(env_id, start, actions, warm_up=()):
+    """Per step, where the world moved one agent and where the layer said the walls would let it go."""
+    env = safe_mapf_envs.parallel_env(env_id, n_agents=1)
+    layer = SafetyLayer.for_env(env)
+    env.reset(seed=0, options={"starts": [start]})
+    for u in warm_up:
+        env.step({"agent_0": np.asarray(u, np.float32)})
+    out = []
+    for u in actions:
+        p = team_positions(env)["agent_0"].copy()
+        said = p + layer.step_length * layer._slide(p[None], np.asarray([u], np.float64))[0]
+        env.step({"agent_0": np.asarray(u, np.float32)})
+        out.append((p, team_positions(env)["agent_0"].copy(), said))
+    env.close()
+    return out
+
+
+def test_a_disc_meeting_a_box_corner_slides_round_it_as_the_world_moves_it():
+    """Driven at a corner of CentralObstacle's box, the disc slides round it: the layer follows the
+    world, where a straight line would miss by half the step."""
+    steps = _followed("SafeCentralObstacle-v0", [19.4, 19.5], [[1.0, 0.6]] * 3)
+    p, moved, said = steps[0]
+    assert np.linalg.norm(moved - (p + [1.0, 0.6])) > 0.5  # the corner turned it
+    for p, moved, said in steps:
+        assert np.linalg.norm(moved - said) < 0.01
+
+
+def test_a_disc_wedged_between_a_wall_and_a_corner_is_known_to_stay():
+    """Apartment3 has a wall under a box whose corner leaves less than a disc's width: driven into the
+    wedge, the disc stays, and the layer knows it stays."""
+    steps = _followed("SafeApartment3-v0", [8.1, 7.9], [[1.0, 0.0], [0.83, -0.24]] * 2, warm_up=[[1.0, -0.3]] * 6)
+    for p, moved, said in steps:
+        assert np.linalg.norm(moved - p) < 0.01 and np.linalg.norm(said - p) < 0.01
+
+
 def test_the_safety_table_reads_the_shipped_runs(run_example):
     on = sorted(str(p) for p in Path("examples/safety").glob("*_on"))
     off = sorted(str(p) for p in Path("examples/safety").glob("*_off"))

@@ -15,9 +15,10 @@ of one step and changes it as little as it can so that no two agents come into c
    constraint binds, each of the two agents also turns aside by ``bias`` of its correction, both
    to their right, so that two agents meeting head on pass each other instead of stopping nose
    to nose.
-2. **Walls.** The filter starts from what the walls let each agent do: an action component that
-   pushes into a wall ahead (the map's boxes grown by the radius) counts only as far as the wall.
-   An agent beside a parked agent turns to the side the walls leave open.
+2. **Walls.** The filter starts from what the walls let each agent do: the disc is moved over the
+   world's sub-steps and pushed out of the map's boxes after each, so that it slides along a wall and
+   round a corner as the world moves it. An agent beside a parked agent turns to the side the walls
+   leave open.
 3. **Guard.** What the filter leaves is checked exactly: two discs moving in straight lines
    over the step, as asked and as the walls let them, come no closer than ``2 * agent_radius``
    plus half the clearance at any moment (unless they are closer already and separate). A pair
@@ -77,6 +78,8 @@ class SafetyLayer:
             many of its last ``2 * patience`` steps is in a deadlock (:attr:`SafetyState.deadlocked`): a
             :class:`~agents.search.policy.SearchPolicy` then counts it stuck, so that it escapes and
             replans.
+        substeps: the world's physics sub-steps per step: the layer follows a disc along a wall and
+            round a corner in as many (:meth:`for_env` reads the env's).
         walls: static boxes ``(x0, y0, x1, y1)`` that stop the agents (``None``: none); :meth:`for_env`
             gives the map's boxes and the world's border.
 
@@ -90,9 +93,12 @@ class SafetyLayer:
     bias: float = 0.5
     iterations: int = 200
     patience: int = 8
+    substeps: int = 4
     walls: Optional[np.ndarray] = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(f"substeps must be an int >= 1, got {self.substeps!r}")
         for name in ("agent_radius", "step_length"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -116,8 +122,8 @@ class SafetyLayer:
 
     @classmethod
     def for_env(cls, env: Any, **options: Any) -> "SafetyLayer":
-        """The layer for a parallel env of this package: its agents' radius, its ``action_scale``, and
-        its walls (the map's boxes and the world's border)."""
+        """The layer for a parallel env of this package: its agents' radius, its ``action_scale``, its
+        physics sub-steps, and its walls (the map's boxes and the world's border)."""
         base = getattr(env, "unwrapped", env)
         scenario = getattr(base, "scenario", None)
         if scenario is None or not hasattr(scenario, "agent_radius"):
@@ -127,6 +133,7 @@ class SafetyLayer:
         border = [(-t, -t, w + t, 0.0), (-t, h, w + t, h + t), (-t, 0.0, 0.0, h), (w, 0.0, w + t, h)]
         walls = np.array(list(scenario.boxes) + border, dtype=np.float64).reshape(-1, 4)
         options.setdefault("walls", walls)
+        options.setdefault("substeps", int(getattr(base, "substeps", 4)))
         return cls(agent_radius=float(scenario.agent_radius),
                    step_length=float(getattr(base, "action_scale", 1.0)), **options)
 
@@ -180,27 +187,49 @@ class SafetyLayer:
         return u.astype(np.float32), steered, stopped
 
     def _slide(self, p: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """The actions ``u`` as far as the walls let each agent move along each axis from ``p`` (a wall
-        ahead stops that component where the disc meets it; the boxes are grown by the radius, their
-        corners square)."""
-        if self.walls is None:
+        """The actions ``u`` as the walls let each agent carry them out from ``p``: the disc is moved over
+        ``substeps`` sub-steps, as the world moves it, and after each it is pushed out of every box it
+        entered along the box's normal at the nearest point, so that it slides along a wall and round
+        a corner. Returns the displacement per unit of ``step_length``, from where the disc rests now."""
+        if self.walls is None or len(self.walls) == 0:
             return u
         r, s = self.agent_radius, self.step_length
-        lo, hi = self.walls[:, :2] - r, self.walls[:, 2:] + r  # (B, 2): the grown boxes
-        out = u.copy()
-        eps = 0.05 * r  # an agent resting against a wall sits a little inside the grown box
-        for ax in (0, 1):
-            other = 1 - ax
-            # boxes the agent's line along this axis runs into: across the other axis it is inside
-            across = (p[:, None, other] > lo[None, :, other] + 1e-9) & (p[:, None, other] < hi[None, :, other] - 1e-9)
-            step = s * u[:, ax]
-            ahead_pos = np.where(across & (lo[None, :, ax] >= p[:, None, ax] - eps), lo[None, :, ax] - p[:, None, ax],
-                                 np.inf)
-            ahead_neg = np.where(across & (hi[None, :, ax] <= p[:, None, ax] + eps), hi[None, :, ax] - p[:, None, ax],
-                                 -np.inf)
-            room_pos = np.maximum(ahead_pos.min(axis=1), 0.0) if len(lo) else np.full(len(p), np.inf)
-            room_neg = np.minimum(ahead_neg.max(axis=1), 0.0) if len(lo) else np.full(len(p), -np.inf)
-            out[:, ax] = np.clip(step, room_neg, room_pos) / s
+        lo, hi = self.walls[:, :2], self.walls[:, 2:]
+        # the boxes each agent can reach in one step
+        out_of = np.maximum(np.maximum(lo[None] - p[:, None], p[:, None] - hi[None]), 0.0)
+        a, b = np.nonzero((out_of * out_of).sum(-1) < (r + math.sqrt(2.0) * s + 1e-6) ** 2)
+        if len(a) == 0:
+            return u
+        blo, bhi = lo[b], hi[b]
+        # the pairs in rounds, each agent's k-th box in round k: boxes are resolved one after the other
+        rank = np.arange(len(a)) - np.searchsorted(a, a)
+        rounds = [np.flatnonzero(rank == k) for k in range(int(rank.max()) + 1)]
+
+        def push_out(q: np.ndarray) -> np.ndarray:
+            # Gauss-Seidel over the boxes: in a wedge (a wall and a corner) the pushes alternate
+            # and shrink towards the point the disc cannot pass
+            for _ in range(12):
+                deepest = 0.0
+                for k in rounds:
+                    ak = a[k]
+                    d = q[ak] - np.clip(q[ak], blo[k], bhi[k])
+                    dist = np.sqrt((d * d).sum(-1))
+                    depth = np.where(dist > 1e-12, r - dist, 0.0)  # a centre inside a box has no normal: left
+                    hit = depth > 1e-9
+                    if hit.any():
+                        q[ak[hit]] += d[hit] / dist[hit, None] * depth[hit, None]
+                        deepest = max(deepest, float(depth[hit].max()))
+                if deepest < 1e-6:
+                    break
+            return q
+
+        start = push_out(p.astype(np.float64).copy())  # a disc at rest sits a hair inside a wall it leans on
+        q = start.copy()
+        step = s * u / self.substeps
+        for _ in range(self.substeps):
+            q = push_out(q + step)
+        out = (q - start) / s
+        out[~np.any(u != 0.0, axis=-1)] = 0.0
         return out
 
     def _pairs(self, p: np.ndarray, reach: float, mov: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
