@@ -82,6 +82,9 @@ REFERENCE_EDGE_STEPS = 600
 REFERENCE_BUFFER_NODES = 1000
 #: the cost :meth:`BufferPlanner.from_agent` with a ``bound`` gives the pairs it never read (never an edge)
 UNREAD_COST = 1e9
+#: places to avoid (parked agents' observations) whose distances a planner keeps per ``d_max``; past it,
+#: it starts over (1000 agents' goals on a 4000-node buffer: about 32 MB)
+_KEPT_PLACES = 4096
 
 
 def _same_rows(x: Any) -> Optional[Tuple[int, int]]:
@@ -268,8 +271,9 @@ class BufferPlanner:
         #: the last endpoints attached and edges found to pass places to avoid (a replan tries graphs from one place)
         self._attached: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray, np.ndarray]]] = None
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
-        #: the buffer nodes' distances to and from the last places to avoid (they outlive the endpoints)
-        self._places: Optional[Tuple[Tuple[Any, ...], Tuple[np.ndarray, np.ndarray]]] = None
+        #: the buffer nodes' distances to and from each place to avoid met so far, by d_max and place (they
+        #: outlive the endpoints and the set of places: a parked agent's stay scored once)
+        self._places: Dict[float, Dict[bytes, Tuple[np.ndarray, np.ndarray]]] = {}
         #: the buffer's edges shorter than d_max, by d_max (shared by the planners over the same matrices), and
         #: the candidate edges of the last endpoints attached
         self._short: Dict[float, EdgeList] = {}
@@ -341,7 +345,7 @@ class BufferPlanner:
         """A planner over the same nodes, matrices and second opinion with these configs."""
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver,
                             second_opinion=self.second_opinion)
-        out._long_legs, out._short = self._long_legs, self._short
+        out._long_legs, out._short, out._places = self._long_legs, self._short, self._places
         return out
 
     def with_options(self, second_opinion: Any = _KEEP, **changes: Any) -> "BufferPlanner":
@@ -351,7 +355,7 @@ class BufferPlanner:
         graph, solver = _vary(self.graph, self.solver_config, changes)
         opinion = self.second_opinion if second_opinion is _KEEP else second_opinion
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver, second_opinion=opinion)
-        out._short = self._short
+        out._short, out._places = self._short, self._places
         if out.second_opinion is self.second_opinion:
             out._long_legs = self._long_legs
         return out
@@ -387,11 +391,8 @@ class BufferPlanner:
             k2 = (key, at.shape, at.tobytes())
             if self._passing is None or self._passing[0] != k2:
                 D2, _, obs = self._attached[1]
-                places = (at.shape, at.tobytes(), g.d_max)
-                if self._places is None or self._places[0] != places:
-                    self._places = (places, place_distances(self.pairwise, self.observations, at, g.d_max))
                 self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, g.proximity_radius or 0, g.d_max,
-                                                   known=self._places[1]))
+                                                   known=self._place_distances(at)))
             passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=g.d_max, c_max=g.c_max, endpoint_edges=g.endpoint_edges,
@@ -401,6 +402,24 @@ class BufferPlanner:
                                    second_opinion=self.second_opinion, detached=detached,
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing,
                                    max_leg=g.max_leg, long_edges=self._long_edges(key), edges=self._edges)
+
+    def _place_distances(self, at: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """:func:`~agents.search.graph.build.place_distances` of the buffer to the places ``at``: each place
+        is scored once per ``d_max``, on its own, and kept (at most :data:`_KEPT_PLACES` of them), so that
+        what a replan reads does not depend on the replans before it."""
+        d_max = self.graph.d_max
+        kept = self._places.setdefault(d_max, {})
+        keys = [row.tobytes() for row in at]
+        new = list(dict.fromkeys(k for k in keys if k not in kept))
+        if len(kept) + len(new) > _KEPT_PLACES:
+            kept.clear()
+            new = list(dict.fromkeys(keys))
+        for k in new:  # one at a time: a place's distances do not depend on which others were new with it
+            place = np.frombuffer(k, dtype=at.dtype).reshape((1,) + at.shape[1:])
+            to_place, from_place = place_distances(self.pairwise, self.observations, place, d_max)
+            kept[k] = (to_place[:, 0], from_place[0])
+        return (np.stack([kept[k][0] for k in keys], axis=1) if keys else np.zeros((len(self.observations), 0)),
+                np.stack([kept[k][1] for k in keys], axis=0) if keys else np.zeros((0, len(self.observations))))
 
     def _short_edges(self) -> EdgeList:
         """The buffer's edges shorter than ``d_max`` (found once per ``d_max``)."""

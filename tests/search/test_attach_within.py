@@ -90,9 +90,10 @@ def test_attaching_new_endpoints_writes_over_the_last_matrices_only_where_nothin
     assert again.nodes == fresh.nodes and again.soc == fresh.soc
 
 
-def test_replans_around_the_same_parked_agents_score_the_buffer_against_them_once():
-    """The buffer nodes' distances to the places to avoid are kept from one replan to the next (only the new
-    start's and goal's are scored), and the graphs are those of a planner that scores everything anew."""
+def test_replans_score_the_buffer_against_each_parked_agent_once():
+    """The buffer nodes' distances to each place to avoid are kept from one replan to the next, whichever
+    places the next one avoids (only the new start's and goal's, and new places, are scored), and the graphs
+    are those of a planner that scores everything anew."""
     from test_planner import euclid_pairwise, grid_points
 
     from agents.search import BufferPlanner
@@ -118,6 +119,11 @@ def test_replans_around_the_same_parked_agents_score_the_buffer_against_them_onc
         again = fresh.plan(pts[[s]] + 0.1, pts[[g]] + 0.1, avoid=parked)
         assert plan.solved and plan.nodes == again.nodes and plan.soc == again.soc
         assert (plan.problem.graph.distance != again.problem.graph.distance).nnz == 0
-    scored.clear()
-    planner.plan(pts[[7]] + 0.1, pts[[60]] + 0.1, avoid=parked[:2])  # other places: the buffer is scored again
-    assert sum(scored) == 2 * (2 * len(pts)) + 4 + 2 * 2 * 2 + 2 * len(pts) * 2
+    # an agent has left: the buffer is not scored again; another has parked: against it alone
+    for (s, g), avoid, new in (((7, 60), parked[:2], 0), ((9, 62), np.vstack([parked[:2], pts[[100]] + 0.05]), 1)):
+        scored.clear()
+        plan = planner.plan(pts[[s]] + 0.1, pts[[g]] + 0.1, avoid=avoid)
+        assert sum(scored) == 2 * (2 * len(pts)) + 4 + 2 * 2 * len(avoid) + 2 * len(pts) * new
+        again = BufferPlanner(pts, D, C, pairwise).with_options(d_max=2.5, proximity_radius=0.5).plan(
+            pts[[s]] + 0.1, pts[[g]] + 0.1, avoid=avoid)
+        assert plan.nodes == again.nodes and (plan.problem.graph.distance != again.problem.graph.distance).nnz == 0
