@@ -313,6 +313,41 @@ def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth
     assert (np.linalg.norm(nodes[[i for i in route if i < len(nodes)]] - goal_1, axis=1) >= 0.7 * 2.4).all()
 
 
+def test_where_every_berth_shuts_the_door_a_replan_still_keeps_off_the_parked_agent(world, planner):
+    """agent_1 parks 1.25 past the only door, on the straight way to agent_0's goal: every berth (down to
+    0.7 of the ban radius, 1.68) takes the door, so no route keeps one. The replan then goes through the
+    door but round the parked agent, on no edge that passes it, rather than past it on the shortest way."""
+    goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.25, 5.0], np.float32)
+    planner = planner.with_options(proximity_radius=0.5)  # an edge passes a place it runs within 0.5 of
+    policy = SearchPolicy(
+        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
+        replanning=ReplanConfig(ban_radius=2.4),
+    )
+    both = {"agent_0": {"observation": START, "desired_goal": goal_0},
+            "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
+    policy.predict(both)
+    policy.predict({"agent_0": both["agent_0"], "agent_1": {"observation": goal_1, "desired_goal": goal_1}})
+    policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
+    assert DOOR in policy.replanner.parked_nodes("agent_0", 0.7)
+    nodes = planner.observations
+    shortest = planner.plan(START[None], goal_0[None])
+    ways = [nodes[i] for i in shortest.nodes[0] if i < len(nodes)] + [goal_0]
+
+    def passes(a, b):  # the line a -> b runs through agent_1's disc (radius 0.5)
+        t = np.clip(np.dot(goal_1 - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        return np.linalg.norm(a + t * (b - a) - goal_1) < 0.5
+
+    assert any(passes(a, b) for a, b in zip(ways[:-1], ways[1:]))  # the shortest way runs through it
+    for _ in range(200):  # agent_0 stands still where it is: it gets stuck and replans
+        if policy.stats.replans:
+            break
+        policy.predict({"agent_0": both["agent_0"]})
+    route = [i for i in policy.routes["agent_0"] if i < len(nodes)]
+    ways = [nodes[i] for i in route] + [goal_0]
+    assert policy.stats.replans == 1 and DOOR in route
+    assert not any(passes(a, b) for a, b in zip(ways[:-1], ways[1:]))
+
+
 def test_an_agent_does_not_park_where_it_would_shut_another_out(world, planner):
     """agent_1's goal lies 1.5 from the only door; agent_0's every way to its goal goes through the door.
     With ``park_clearance`` agent_1 parks only after agent_0 has arrived; without it (the default), nothing

@@ -18,7 +18,8 @@
   predicted steps shorter: the neighbourhood held the short way, a doorway's other nodes); around
   the failed waypoints only (the neighbourhood held the only doorway);
   localised (its start attached to the nodes the critic puts nearest), with a berth of 1, 0.85 or
-  0.7 ban radii around the goals of parked agents, then past them. It tries these first without
+  0.7 ban radii around the goals of parked agents, then with no berth but no edge that passes a
+  parked agent (in a crowd the berths leave no way through), then past them. It tries these first without
   the detached links, then with them back (where it stands right by the node it failed to reach,
   they may be all it can link to); then over the edges it failed on itself, less those the memory
   removed (without the detached links, then with them); and at last over every edge (it was not
@@ -170,7 +171,7 @@ class Replanner:
             (state.banned, state.banned + parked, edges, True),
             (list(state.failed), state.failed + parked, edges, True), ([], parked, edges, True),
             *[([], self.parked_nodes(agent, share), edges, True) for share in (0.85, 0.7)],
-            ([], parked, edges, False)]
+            ([], [], edges, True), ([], parked, edges, False)]
         none: Tuple[List[int], List[int]] = ([], [])
         detached = (sorted(set(state.detached)), sorted(set(state.goal_detached)))
         learned = edges if shared else self.memory.removed()
