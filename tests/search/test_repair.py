@@ -284,12 +284,10 @@ def test_replans_keep_clear_of_agents_parked_at_their_goals(world, planner):
     assert policy.stats.replans == 1 and not set(policy.routes["agent_0"]) & set(near)
 
 
-def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth_left(world, planner):
-    """agent_1 parks 1.8 from the only door, on the way to agent_0's goal: every route passes within the
-    ban radius (2.4) of it, so a stuck agent_0 replans with the widest smaller berth that leaves one
-    (0.7 of it): through the door, but clear of the nodes right by the parked agent, which the shortest
-    route takes."""
-    goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.8, 5.0], np.float32)
+def park_agent_1(planner, world, goal_0, goal_1, seen_at_goal=False):
+    """A policy (ban radius 2.4) that has planned agent_0 from START to ``goal_0`` and agent_1 from (9, 1) to
+    ``goal_1``, then seen agent_1 arrive (last seen at its start, or at its goal with ``seen_at_goal``);
+    returns it and the agents' first observations."""
     policy = SearchPolicy(
         planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
         replanning=ReplanConfig(ban_radius=2.4),
@@ -297,7 +295,19 @@ def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth
     both = {"agent_0": {"observation": START, "desired_goal": goal_0},
             "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
     policy.predict(both)
+    if seen_at_goal:
+        policy.predict({"agent_0": both["agent_0"], "agent_1": {"observation": goal_1, "desired_goal": goal_1}})
     policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
+    return policy, both
+
+
+def test_by_an_agent_parked_beside_the_only_door_a_replan_keeps_the_widest_berth_left(world, planner):
+    """agent_1 parks 1.8 from the only door, on the way to agent_0's goal: every route passes within the
+    ban radius (2.4) of it, so a stuck agent_0 replans with the widest smaller berth that leaves one
+    (0.7 of it): through the door, but clear of the nodes right by the parked agent, which the shortest
+    route takes."""
+    goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.8, 5.0], np.float32)
+    policy, both = park_agent_1(planner, world, goal_0, goal_1)
     nodes = planner.observations
     assert DOOR in policy.replanner.parked_nodes("agent_0") and DOOR in policy.replanner.parked_nodes("agent_0", 0.85)
     berth = policy.replanner.parked_nodes("agent_0", 0.7)
@@ -319,15 +329,7 @@ def test_where_every_berth_shuts_the_door_a_replan_still_keeps_off_the_parked_ag
     door but round the parked agent, on no edge that passes it, rather than past it on the shortest way."""
     goal_0, goal_1 = np.array([9.0, 5.0], np.float32), np.array([6.25, 5.0], np.float32)
     planner = planner.with_options(proximity_radius=0.5)  # an edge passes a place it runs within 0.5 of
-    policy = SearchPolicy(
-        planner, world, controller=ControllerConfig(reach_threshold=1.5, safety_radius=None),
-        replanning=ReplanConfig(ban_radius=2.4),
-    )
-    both = {"agent_0": {"observation": START, "desired_goal": goal_0},
-            "agent_1": {"observation": np.array([9.0, 1.0], np.float32), "desired_goal": goal_1}}
-    policy.predict(both)
-    policy.predict({"agent_0": both["agent_0"], "agent_1": {"observation": goal_1, "desired_goal": goal_1}})
-    policy.predict({"agent_0": both["agent_0"]})  # agent_1 arrived
+    policy, both = park_agent_1(planner, world, goal_0, goal_1, seen_at_goal=True)
     assert DOOR in policy.replanner.parked_nodes("agent_0", 0.7)
     nodes = planner.observations
     shortest = planner.plan(START[None], goal_0[None])

@@ -231,7 +231,7 @@ def test_a_disc_meeting_a_box_corner_slides_round_it_as_the_world_moves_it():
     steps = _followed("SafeCentralObstacle-v0", [19.4, 19.5], [[1.0, 0.6]] * 3)
     p, moved, said = steps[0]
     assert np.linalg.norm(moved - (p + [1.0, 0.6])) > 0.5  # the corner turned it
-    for p, moved, said in steps:
+    for _, moved, said in steps:
         assert np.linalg.norm(moved - said) < 0.01
 
 
