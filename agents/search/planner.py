@@ -410,16 +410,16 @@ class BufferPlanner:
         d_max = self.graph.d_max
         kept = self._places.setdefault(d_max, {})
         keys = [row.tobytes() for row in at]
-        new = list(dict.fromkeys(k for k in keys if k not in kept))
-        if len(kept) + len(new) > _KEPT_PLACES:
+        first: Dict[bytes, int] = {}  # each place's first row in ``at``
+        for i, k in enumerate(keys):
+            first.setdefault(k, i)
+        if len(kept) + sum(k not in kept for k in first) > _KEPT_PLACES:
             kept.clear()
-            new = list(dict.fromkeys(keys))
-        for k in new:  # one at a time: a place's distances do not depend on which others were new with it
-            place = np.frombuffer(k, dtype=at.dtype).reshape((1,) + at.shape[1:])
-            to_place, from_place = place_distances(self.pairwise, self.observations, place, d_max)
-            kept[k] = (to_place[:, 0], from_place[0])
-        return (np.stack([kept[k][0] for k in keys], axis=1) if keys else np.zeros((len(self.observations), 0)),
-                np.stack([kept[k][1] for k in keys], axis=0) if keys else np.zeros((0, len(self.observations))))
+        for k, i in first.items():
+            if k not in kept:  # one at a time: a place's distances do not depend on which others were new with it
+                to_place, from_place = place_distances(self.pairwise, self.observations, at[i:i + 1], d_max)
+                kept[k] = (to_place[:, 0], from_place[0])
+        return np.stack([kept[k][0] for k in keys], axis=1), np.stack([kept[k][1] for k in keys], axis=0)
 
     def _short_edges(self) -> EdgeList:
         """The buffer's edges shorter than ``d_max`` (found once per ``d_max``)."""
