@@ -29,7 +29,7 @@ import json
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -50,7 +50,7 @@ from .waypoints import direct_plans
 #: :meth:`SearchPolicy.from_models`' and :meth:`SearchPolicy.load`'s marker of an argument not given
 _DEFAULT: Any = object()
 #: keyword arguments of :class:`SearchPolicy` that ``from_models`` and ``load`` pass on (not config options)
-_POLICY_ARGUMENTS = ("distance_model", "deterministic", "fallback_model", "memory", "safety")
+_POLICY_ARGUMENTS = ("distance_model", "deterministic", "fallback_model", "memory", "safety", "bound")
 
 
 def _saved_config(path: Union[str, Path], text: Any, key: str) -> SearchConfig:
@@ -111,6 +111,11 @@ class SearchPolicy:
             that no two agents touch (e.g. ``SafetyLayer.for_env(env)``); it reads the team's shared
             positions, which :meth:`predict` then needs (``positions=team_positions(env)``).
             ``None``: actions go to the env as the controller makes them.
+        bound: optional ``bound(obs_a, obs_b) -> (N, M)``, a lower bound of the steps between
+            observations that costs no critic call, such as the environment's ``min_steps``
+            (vector observations): the controller's yield and clear-goal rules then read the
+            critic only on pairs of agents it puts within their radii (with hundreds of agents,
+            most pairs are far apart). ``None``: every pair is read.
 
     How the agents keep to the plan is the controller config's ``hold``: ``"order"`` (the plan's
     order, not its clock: an agent sets off for a place the plan sends another agent through first
@@ -134,6 +139,7 @@ class SearchPolicy:
         fallback_model: Any = None,
         memory: Optional[EdgeMemory] = None,
         safety: Optional[SafetyLayer] = None,
+        bound: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
     ) -> None:
         judge = distance_model if distance_model is not None else policy_model
         if not hasattr(policy_model, "predict"):
@@ -161,6 +167,9 @@ class SearchPolicy:
         if safety is not None and not isinstance(safety, SafetyLayer):
             raise TypeError(f"safety must be a SafetyLayer or None, got {type(safety).__name__}")
         self.safety = safety
+        if bound is not None and not callable(bound):
+            raise TypeError(f"bound must be a function bound(obs_a, obs_b) or None, got {type(bound).__name__}")
+        self.bound = bound
         self.seed = seed
         self.deterministic = bool(deterministic)
         self.fallback_model = fallback_model
@@ -212,7 +221,9 @@ class SearchPolicy:
             kwargs: options of the config by name (:data:`~agents.search.config.OPTIONS`: ``c_max``,
                 ``hold``, ``solver``, ...), applied to ``config``, and the constructor's keyword
                 arguments (``fallback_model``, ``safety``, ``memory``, ``deterministic``,
-                ``distance_model``). :attr:`config` of the result is the config in use.
+                ``distance_model``, ``bound``; a ``bound`` also spares the planner's critic the
+                pairs it rules out, as in :meth:`BufferPlanner.from_agent`). :attr:`config` of the
+                result is the config in use.
         """
         check_models(critic, driver)
         own = {k: kwargs.pop(k) for k in _POLICY_ARGUMENTS if k in kwargs}
@@ -232,7 +243,7 @@ class SearchPolicy:
             obs = np.asarray(nodes)
         opinion = default_second_opinion(critic, driver) if second_opinion is _DEFAULT else second_opinion
         planner = BufferPlanner.from_agent(critic, obs, aggregate=aggregate, graph=config.graph, solver=config.solver,
-                                           second_opinion=opinion)
+                                           second_opinion=opinion, bound=own.get("bound"))
         if sparsify is not None:
             planner, _ = planner.sparsified(sparsify)
         own.setdefault("seed", seed)
@@ -307,7 +318,8 @@ class SearchPolicy:
         if opinion is None and saved.graph.max_leg is not None and config.graph is saved.graph:
             config = replace(config, graph=replace(config.graph, max_leg=None))  # nothing to read legs with
         config = config.updated(**kwargs)
-        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate), config.graph, config.solver,
+        planner = BufferPlanner(obs, D, C, NodePairwise(critic, obs, aggregate, bound=own.get("bound")),
+                                config.graph, config.solver,
                                 second_opinion=opinion)
         own.setdefault("memory", memory)
         return cls(planner, driver if driver is not None else critic, controller=config.controller,
@@ -526,7 +538,7 @@ class SearchPolicy:
             else None
         self.controller = WaypointController(self._policy, self._distance, plans, self.config.controller,
                                              seed=self.seed, replan=replan, fallback_policy=self._fallback,
-                                             goal_order=goal_order)
+                                             goal_order=goal_order, bound=self.bound)
 
     def _plan(self, starts: np.ndarray, goals: np.ndarray) -> MultiAgentPlan:
         """A joint plan without the edges the memory removed; where that leaves an agent without any

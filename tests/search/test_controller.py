@@ -792,3 +792,44 @@ def test_a_leg_the_drivers_critic_puts_out_of_reach_is_handed_to_the_fallback_at
     assert arrivals[20.0] < arrivals[None]
     with pytest.raises(ValueError, match="fallback_beyond"):
         WaypointController(main, critic, {"agent_0": AgentPlan(wp, goal)}, config=ControllerConfig(fallback_beyond=0.0))
+
+
+def test_a_distance_bound_spares_the_critic_far_pairs_and_changes_no_decision():
+    """60 agents scattered over the map, some by each other's goals: with a lower bound of the
+    steps (here the straight line less half a unit), the yield and clear-goal rules read the critic
+    on a small share of the pairs, and every agent holds (or not) as without the bound."""
+    rng = np.random.default_rng(4)
+    n = 60
+    pos = rng.uniform(2, 53, size=(n, 2))
+    goals = pos + rng.normal(scale=2.0, size=(n, 2))  # most agents near their goals (the clear-goal rule)
+    goals[::3] = rng.uniform(2, 53, size=(len(goals[::3]), 2))
+    obs = {f"agent_{i}": (pos[i] / SIZE).astype(np.float32) for i in range(n)}
+
+    def holdings(bound):
+        read = []
+
+        def counted(a, b):
+            read.append(len(a))
+            return euclid_steps(a, b)
+
+        plans = {f"agent_{i}": AgentPlan(np.zeros((0, 2), np.float32), (goals[i] / SIZE).astype(np.float32))
+                 for i in range(n)}
+        ctrl = WaypointController(straight_policy, counted, plans, bound=bound,
+                                  config=ControllerConfig(reach_threshold=0.5, safety_radius=3.0, stuck_window=None,
+                                                          goal_clearance=3.0))
+        ctrl.act(obs)
+        return ctrl.stats.holding, sum(read)
+
+    def bound(a, b):
+        return np.maximum(np.linalg.norm((a[:, None] - b[None]) * SIZE, axis=-1) - 0.5, 0.0)
+
+    every, read_all = holdings(None)
+    near, read_near = holdings(bound)
+    assert near == every
+    assert any(v and v.startswith("yield") for v in every.values())
+    assert any(v and v.startswith("clear") for v in every.values())
+    assert read_near < read_all / 10
+    with pytest.raises(ValueError, match="bound returned shape"):
+        WaypointController(straight_policy, euclid_steps, {"agent_0": AgentPlan(np.zeros((0, 2)), goals[0] / SIZE),
+                                                           "agent_1": AgentPlan(np.zeros((0, 2)), goals[1] / SIZE)},
+                           bound=lambda a, b: np.zeros(3)).act({"agent_0": obs["agent_0"], "agent_1": obs["agent_1"]})

@@ -48,6 +48,7 @@ class GoalClearance:
     plans: Dict[str, Any]
     distance: Callable[[np.ndarray, np.ndarray], np.ndarray]
     proximity: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]]
+    bound: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]]
     stats: Any
     _clearing: Dict[str, str]
     _clear_since: Dict[Tuple[str, str], int]
@@ -71,6 +72,9 @@ class GoalClearance:
             # reason would keep it waiting for nothing
             others = [j for j, b in enumerate(live) if j != i and b not in self._clear_gave_up[a]
                       and self._clearing.get(b) != a and before.get(b) != a and reason[j] in (None, f"wait:{a}")]
+            if others and self.bound is not None:  # the critic reads only agents that may stand by the goal
+                near = self._lower_bound(obs[others], np.asarray(self.plans[a].goal)[None])[:, 0] < r
+                others = [j for j, k in zip(others, near) if k]
             if not others:
                 continue
             n = len(others)
@@ -98,6 +102,14 @@ class GoalClearance:
                 self._clearing[a] = b
                 self.stats.waits += 1
                 break
+
+    def _lower_bound(self, obs_a: np.ndarray, obs_b: np.ndarray) -> np.ndarray:
+        """``bound(obs_a, obs_b)``, checked: ``(len(obs_a), len(obs_b))`` lower bounds of the steps."""
+        assert self.bound is not None  # checked by the caller
+        out = np.asarray(self.bound(obs_a, obs_b), dtype=np.float64)
+        if out.shape != (len(obs_a), len(obs_b)):
+            raise ValueError(f"bound returned shape {out.shape}, expected {(len(obs_a), len(obs_b))}")
+        return out
 
     def _touching(self, x: np.ndarray, y: np.ndarray) -> bool:
         """Whether two agents' observations are within ``safety_radius`` (under ``proximity``): the

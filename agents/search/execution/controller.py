@@ -123,6 +123,11 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
             reached its target ``r`` (or arrived), since ``other``'s route passes ``agent``'s
             goal. Asked afresh at every step (routes change when agents replan); waits as long as
             ``order_patience`` allows. An agent it holds so no longer waits for it by the plan's order.
+        bound: optional ``bound(obs_a[N, ...], obs_b[M, ...]) -> (N, M)``, a lower bound of the
+            steps between observations that costs no critic call (the env's ``min_steps``, vector
+            observations): the yield and clear-goal rules read the critic only on the pairs it puts
+            within their radii (``safety_radius``, ``goal_clearance``), so that a step costs about
+            as many critic readings as there are agents close to each other, not one per pair.
         seed: seed of the escape actions.
     """
 
@@ -137,6 +142,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         proximity: Optional[PairFn] = None,
         replan: Optional[Callable[[str, np.ndarray, AgentPlan], AgentPlan]] = None,
         goal_order: Optional[Callable[[str], List[Tuple[str, int]]]] = None,
+        bound: Optional[PairFn] = None,
         seed: Optional[int] = 0,
     ) -> None:
         config = ControllerConfig() if config is None else config
@@ -151,6 +157,7 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         self.proximity = proximity
         self.replan = replan
         self.goal_order = goal_order
+        self.bound = bound
         self.rng = np.random.default_rng(seed)
         #: per agent: waypoints reached so far, and the count at which its fallback leg began
         self._reached = {a: 0 for a in self.plans}
@@ -475,12 +482,13 @@ class WaypointController(GoalClearance, AdvanceRules, OrderRules):
         only pairs of agents that would both move (``moving``) yield."""
         before, self._goal_priority = self._goal_priority, {}
         pushed, yielding, self._pushed, self._yielding = self._pushed, self._yielding, {}, {}
-        ii, jj = np.triu_indices(len(live), 1)
-        both = moving[ii] & moving[jj]
-        ii, jj = ii[both], jj[both]
+        assert self.config.safety_radius is not None  # checked by the caller
+        both = moving[:, None] & moving[None, :]
+        if self.bound is not None:  # the critic reads only pairs that may be close
+            both &= self._lower_bound(obs, obs) < self.config.safety_radius
+        ii, jj = np.nonzero(np.triu(both, 1))
         if len(ii) == 0:
             return {}
-        assert self.config.safety_radius is not None  # checked by the caller
         close = pair_proximity(self.distance, self.proximity, obs[ii], obs[jj]) < self.config.safety_radius
         if not close.any():
             return {}
