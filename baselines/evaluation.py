@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -70,7 +70,10 @@ class EvaluationSetup:
     :class:`~agents.algorithm.SafeGoalTD3`. ``graph`` and ``solver`` configure the planner every
     search method starts from (default: the graph of
     :func:`~agents.search.config.preset_for` the unconstrained agent, the default solver); a
-    method changes them with its options.
+    method changes them with its options. ``bound``: a lower bound of the steps between
+    observations (:meth:`build` sets the env's :meth:`~safe_mapf_envs.base.NavigationEnvBase.step_bound`
+    for vector observations): the critics read only the start and goal pairs it puts within
+    ``d_max`` (:class:`~agents.search.graph.build.NodePairwise`).
     """
 
     env_id: str
@@ -82,13 +85,14 @@ class EvaluationSetup:
     min_separation: float = 2.5
     graph: Optional[GraphConfig] = None
     solver: Optional[SolverConfig] = None
+    bound: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None
     shortest: np.ndarray = field(init=False, repr=False)
     planner: BufferPlanner = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         unc = self.models["unconstrained"]
         self.planner = BufferPlanner(
-            self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max"),
+            self.observations, self.D, self.C, NodePairwise(unc, self.observations, "max", bound=self.bound),
             self.graph if self.graph is not None else preset_for(unc).graph, self.solver,
             second_opinion=default_second_opinion(unc, self.models.get("constrained")))
         # problem difficulty: shortest predicted distances on the planner's own buffer graph
@@ -113,6 +117,8 @@ class EvaluationSetup:
         states = env.unwrapped.sample_states(n_nodes, rng)
         obs = np.asarray(env.unwrapped.observations_at(states))
         env.close()
+        if env.unwrapped.obs_type == "vector":
+            kwargs.setdefault("bound", env.unwrapped.step_bound())
         if "min_separation" not in kwargs:
             kwargs["min_separation"] = default_min_separation(env_id)
         D, C = models["unconstrained"].pairwise(obs, obs, aggregate="max")

@@ -14,6 +14,7 @@ ignored with a ``UserWarning`` that names them (see
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import gymnasium
@@ -28,6 +29,31 @@ from .sensors import PanoramaSensor, scene_for_layout
 
 #: Render modes of both environments.
 RENDER_MODES = ("rgb_array", "human")
+
+
+@dataclass(frozen=True)
+class StepBound:
+    """A lower bound of the steps between vector observations, as a plain (picklable) function of
+    ``(obs_a[N, 2], obs_b[M, 2]) -> (N, M)``: the straight-line distance less ``goal_threshold``
+    over the longest step (an action is clipped to ``[-1, 1]`` per axis, so a step moves at most
+    ``sqrt(2) * action_scale``). What :meth:`NavigationEnvBase.min_steps` computes, without the env.
+
+    Attributes:
+        size: the world's extent ``(width, height)`` in units (observations are positions over it).
+        goal_threshold: how near a goal counts as reached (units).
+        action_scale: the longest move per step along each axis (units).
+    """
+
+    size: Tuple[float, float]
+    goal_threshold: float
+    action_scale: float
+
+    def __call__(self, obs_a: np.ndarray, obs_b: np.ndarray) -> np.ndarray:
+        size = np.asarray(self.size, dtype=np.float64)
+        a = np.asarray(obs_a, dtype=np.float64).reshape(-1, 2) * size
+        b = np.asarray(obs_b, dtype=np.float64).reshape(-1, 2) * size
+        gap = np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)) - self.goal_threshold
+        return np.maximum(gap, 0.0) / (np.sqrt(2.0) * self.action_scale)
 
 
 class NavigationEnvBase:
@@ -120,12 +146,15 @@ class NavigationEnvBase:
         moves at most ``sqrt(2) * action_scale``). No walls are looked at, so it costs a distance
         matrix; a planner reads its critics only where this bound is short
         (:class:`~agents.search.graph.build.NodePairwise`'s ``bound``). Vector observations only."""
+        return self.step_bound()(obs_a, obs_b)
+
+    def step_bound(self) -> StepBound:
+        """:meth:`min_steps` as a :class:`StepBound` of this env's world, to hand to other processes.
+        Vector observations only."""
         if self.obs_type != "vector":
             raise ValueError(f"min_steps needs vector observations (positions); this env observes {self.obs_type}s")
-        a = self.denormalize(np.asarray(obs_a).reshape(-1, 2))
-        b = self.denormalize(np.asarray(obs_b).reshape(-1, 2))
-        gap = np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)) - self.goal_threshold
-        return np.maximum(gap, 0.0) / (np.sqrt(2.0) * self.action_scale)
+        width, height = self.world_size
+        return StepBound((float(width), float(height)), float(self.goal_threshold), float(self.action_scale))
 
     def sample_states(
         self, n: int, rng: Optional[np.random.Generator] = None, max_cost: Optional[float] = None

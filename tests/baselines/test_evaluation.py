@@ -478,3 +478,13 @@ def test_execute_splits_each_agents_cost_by_what_it_did(setup):
         else:  # vector agents keep to the plan's times
             assert "wait" in paid and not {"order", "park"} & paid
     env.close()
+
+
+def test_the_setup_of_a_vector_env_hands_the_planner_its_distance_bound(stand_in_models):
+    """Starts and goals are attached with the env's straight-line bound: the critics read only the
+    pairs it puts within ``d_max``."""
+    import gymnasium as gym
+
+    built = EvaluationSetup.build("SafeCentralObstacle-v0", n_nodes=60, models=stand_in_models)
+    assert built.bound == gym.make("SafeCentralObstacle-v0").unwrapped.step_bound()
+    assert built.planner.pairwise.bound is built.bound

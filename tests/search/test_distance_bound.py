@@ -1,5 +1,7 @@
 """A cheap lower bound of the distance decides which pairs the critics read: the environment's
 ``min_steps`` and :class:`~agents.search.graph.build.NodePairwise`'s ``bound``."""
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -27,6 +29,9 @@ def test_min_steps_bounds_what_an_agent_can_cover():
     assert env.min_steps(env.normalize(start[None]), env.normalize(env.position[None]))[0, 0] <= 10
     with pytest.raises(ValueError, match="needs vector observations"):
         gym.make("SafeCentralObstacleVisual-v0").unwrapped.min_steps(a, b)
+    # the same bound without the env, for other processes
+    bound = pickle.loads(pickle.dumps(env.step_bound()))
+    np.testing.assert_array_equal(bound(a, b), steps)
 
 
 def test_a_bound_leaves_the_near_pairs_exact_and_reads_no_far_pair():
