@@ -55,6 +55,7 @@ from .graph.build import (
     check_endpoints,
     passing_edges,
     place_distances,
+    place_passing,
 )
 from .graph.edges import EdgeList, problem_edges
 from .graph.pruning import long_legs, route_from_predecessors
@@ -274,6 +275,8 @@ class BufferPlanner:
         #: the buffer nodes' distances to and from each place to avoid met so far, by d_max and place (they
         #: outlive the endpoints and the set of places: a parked agent's stay scored once)
         self._places: Dict[float, Dict[bytes, Tuple[np.ndarray, np.ndarray]]] = {}
+        #: and the buffer's edges that pass each of them, by d_max and slack (:func:`place_passing`)
+        self._place_pairs: Dict[Tuple[float, float], Dict[bytes, np.ndarray]] = {}
         #: the buffer's edges shorter than d_max, by d_max (shared by the planners over the same matrices), and
         #: the candidate edges of the last endpoints attached
         self._short: Dict[float, EdgeList] = {}
@@ -346,6 +349,7 @@ class BufferPlanner:
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver,
                             second_opinion=self.second_opinion)
         out._long_legs, out._short, out._places = self._long_legs, self._short, self._places
+        out._place_pairs = self._place_pairs
         return out
 
     def with_options(self, second_opinion: Any = _KEEP, **changes: Any) -> "BufferPlanner":
@@ -355,7 +359,7 @@ class BufferPlanner:
         graph, solver = _vary(self.graph, self.solver_config, changes)
         opinion = self.second_opinion if second_opinion is _KEEP else second_opinion
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver, second_opinion=opinion)
-        out._short, out._places = self._short, self._places
+        out._short, out._places, out._place_pairs = self._short, self._places, self._place_pairs
         if out.second_opinion is self.second_opinion:
             out._long_legs = self._long_legs
         return out
@@ -391,8 +395,10 @@ class BufferPlanner:
             k2 = (key, at.shape, at.tobytes())
             if self._passing is None or self._passing[0] != k2:
                 D2, _, obs = self._attached[1]
-                self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, g.proximity_radius or 0, g.d_max,
-                                                   known=self._place_distances(at)))
+                slack = g.proximity_radius or 0
+                known = self._place_distances(at)
+                self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, slack, g.d_max, known=known,
+                                                   known_pairs=self._place_pairs_of(at, known, slack)))
             passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=g.d_max, c_max=g.c_max, endpoint_edges=g.endpoint_edges,
@@ -420,6 +426,19 @@ class BufferPlanner:
                 to_place, from_place = place_distances(self.pairwise, self.observations, at[i:i + 1], d_max)
                 kept[k] = (to_place[:, 0], from_place[0])
         return np.stack([kept[k][0] for k in keys], axis=1), np.stack([kept[k][1] for k in keys], axis=0)
+
+    def _place_pairs_of(self, at: np.ndarray, known: Tuple[np.ndarray, np.ndarray], slack: float) -> List[np.ndarray]:
+        """Per place of ``at``, the buffer's edges that pass it (:func:`place_passing`, from the place's
+        distances ``known``), each found once per ``d_max`` and ``slack`` and kept (at most
+        :data:`_KEPT_PLACES` places)."""
+        kept = self._place_pairs.setdefault((self.graph.d_max, float(slack)), {})
+        keys = [row.tobytes() for row in at]
+        if len(kept) + len(set(keys) - set(kept)) > _KEPT_PLACES:
+            kept.clear()
+        for j, k in enumerate(keys):
+            if k not in kept:
+                kept[k] = place_passing(self.D, known[0][:, j], known[1][j], slack, self.graph.d_max)
+        return [kept[k] for k in keys]
 
     def _short_edges(self) -> EdgeList:
         """The buffer's edges shorter than ``d_max`` (found once per ``d_max``)."""

@@ -659,36 +659,82 @@ def place_distances(pairwise: PairwiseFn, observations: np.ndarray, places: np.n
     return score(observations, places)[0], score(places, observations)[0]
 
 
+def _passing_block(D: np.ndarray, to_place: np.ndarray, from_place: np.ndarray, us: np.ndarray, vs: np.ndarray,
+                   slack: float, d_max: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
+    """The pairs of ``us x vs`` whose edge passes one place (``to_place[u]``, ``from_place[v]``: the
+    distances to and from it): ``(u, v)`` arrays."""
+    if not (len(us) and len(vs)):
+        return us[:0], vs[:0]
+    d = np.asarray(D[np.ix_(us, vs)])
+    through = to_place[us][:, None] + from_place[vs][None, :] <= d + slack
+    if d_max is not None:
+        through &= d < d_max
+    a, b = np.nonzero(through)
+    return us[a], vs[b]
+
+
+def _near_place(to_place: np.ndarray, from_place: np.ndarray, slack: float,
+                d_max: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
+    """The nodes an edge through a place may start and end at: an edge (shorter than ``d_max``)
+    through it comes within ``d_max + slack`` of it at both ends."""
+    limit = np.inf if d_max is None else float(d_max) + slack
+    return np.flatnonzero(to_place < limit), np.flatnonzero(from_place < limit)
+
+
+def place_passing(D: np.ndarray, to_place: np.ndarray, from_place: np.ndarray, slack: float,
+                  d_max: Optional[float] = None) -> np.ndarray:
+    """The edges among the nodes of ``D`` that pass one place, ``to_place[u]`` / ``from_place[v]`` being
+    the distances to and from it (``(N,)`` each): ``(E, 2)`` node pairs, row-major, the rule of
+    :func:`passing_edges`. A buffer's are kept per place by a planner (its replans around parked
+    agents ask for the same places again and again)."""
+    us, vs = _near_place(to_place, from_place, slack, d_max)
+    u, v = _passing_block(D, to_place, from_place, us, vs, slack, d_max)
+    return np.stack([u, v], axis=1).astype(np.int64)
+
+
 def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn, places: np.ndarray,
                   slack: float, d_max: Optional[float] = None,
-                  known: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> np.ndarray:
+                  known: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+                  known_pairs: Optional[Sequence[np.ndarray]] = None) -> np.ndarray:
     """The edges ``u -> v`` among ``observations`` (distances ``D``) that pass one of ``places``: going
     through it is at most ``slack`` longer than the edge. An edge that ends at such a place passes it
     too. ``(E, 2)`` node pairs, sorted. ``d_max`` as for :func:`attach_endpoints`; with it, only pairs
     closer than ``d_max`` (the edges a problem graph may hold) are listed. ``known``: what
     :func:`place_distances` gives for the first observations (a buffer's, whose distances to parked
-    agents do not change from one replan to the next); only the others are scored."""
+    agents do not change from one replan to the next); only the others are scored. ``known_pairs``
+    (with ``known``): per place, the pairs among those first observations that pass it
+    (:func:`place_passing` of their block of ``D``); then only pairs with another node are compared."""
     have = 0 if known is None else len(known[0])
+    if known_pairs is not None and (known is None or len(known_pairs) != len(places)):
+        raise ValueError("known_pairs needs known, and one array of pairs per place")
     to_place, from_place = place_distances(pairwise, observations[have:], places, d_max)
     if known is not None:
         to_place = np.concatenate([known[0], to_place], axis=0)
         from_place = np.concatenate([known[1], from_place], axis=1)
     m = len(observations)
     found = []
-    # an edge (shorter than d_max) through a place comes within d_max + slack of it at both ends: only
-    # the pairs of such nodes are compared
-    limit = np.inf if d_max is None else float(d_max) + slack
-    for j in range(len(places)):
-        us = np.flatnonzero(to_place[:, j] < limit)
-        vs = np.flatnonzero(from_place[j] < limit)
-        if not (len(us) and len(vs)):
-            continue
-        d = np.asarray(D[np.ix_(us, vs)])
-        through = to_place[us, j][:, None] + from_place[j, vs][None, :] <= d + slack
-        if d_max is not None:
-            through &= d < d_max
-        a, b = np.nonzero(through)
-        found.append(us[a].astype(np.int64) * m + vs[b])
+    if known_pairs is None:
+        for j in range(len(places)):
+            us, vs = _near_place(to_place[:, j], from_place[j], slack, d_max)
+            u, v = _passing_block(D, to_place[:, j], from_place[j], us, vs, slack, d_max)
+            found.append(u.astype(np.int64) * m + v)
+    else:
+        found += [np.asarray(k, dtype=np.int64).reshape(-1, 2) @ np.array([m, 1], np.int64) for k in known_pairs]
+        # the pairs with another node, all places at once: an edge passes one of them where the shortest
+        # way through a place it may start and end near is short enough
+        limit = np.inf if d_max is None else float(d_max) + slack
+        to_near = np.where(to_place < limit, to_place, np.inf)  # (m, P)
+        from_near = np.where(from_place < limit, from_place, np.inf)  # (P, m)
+        every, buffer = np.arange(m, dtype=np.int64), np.arange(have, dtype=np.int64)
+        for e in range(have, m):
+            ends = np.full(m, e, np.int64)
+            for rows, cols, through in ((every, ends, (to_near + from_near[:, e]).min(axis=1)),  # u -> e
+                                        (ends[:have], buffer, (to_near[e][:, None] + from_near[:, :have]).min(axis=0))):
+                d = np.asarray(D[rows, cols], dtype=np.float64)
+                ok = np.isfinite(through) & (through <= d + slack)
+                if d_max is not None:
+                    ok &= d < d_max
+                found.append(rows[ok] * m + cols[ok])
     keys = np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
     pairs = np.stack([keys // m, keys % m], axis=1)
     return pairs[pairs[:, 0] != pairs[:, 1]]
@@ -797,5 +843,5 @@ def build_problem_graph(
 
 __all__ = ["BorderedMatrix", "NodePairwise", "PairwiseFn", "ProblemGraph", "WaypointGraph", "attach_endpoints",
            "build_problem_graph", "check_endpoints", "check_graph_nodes", "edge_mask", "env_record", "passing_edges",
-           "place_distances",
+           "place_distances", "place_passing",
            "problem_edge_mask"]
