@@ -318,15 +318,16 @@ def test_passing_edges_compare_only_the_nodes_near_a_place(d_max):
     np.fill_diagonal(every, False)
     edges = np.ones_like(out) if d_max is None else D < d_max
     assert out.any() and np.array_equal(out, every & edges)
-    # the first 50 nodes a buffer whose distances and pairs through each place are known: the same pairs
-    have = 50
-    known = (to_place[:have], from_place[:, :have])
-    known_pairs = [place_passing(D[:have, :have], to_place[:have, j], from_place[j, :have], 0.5, d_max)
-                   for j in range(len(places))]
-    tables = iter([(to_place[have:], None), (from_place[:, have:], None)])
-    again = passing_edges(D, pts, lambda a, b: next(tables), places, slack=0.5, d_max=d_max, known=known,
-                          known_pairs=known_pairs)
-    assert np.array_equal(again, pairs)
-    assert any(len(k) for k in known_pairs) and any((pairs >= have).any(axis=1) & (pairs < have).any(axis=1))
+    # the first nodes a buffer whose distances and pairs through each place are known: the same pairs, with
+    # few other nodes (compared with all places at once) and with more (place by place)
+    for have in (50, 57):
+        known = (to_place[:have], from_place[:, :have])
+        known_pairs = [place_passing(D[:have, :have], to_place[:have, j], from_place[j, :have], 0.5, d_max)
+                       for j in range(len(places))]
+        tables = iter([(to_place[have:], None), (from_place[:, have:], None)])
+        again = passing_edges(D, pts, lambda a, b, t=tables: next(t), places, slack=0.5, d_max=d_max, known=known,
+                              known_pairs=known_pairs)
+        assert np.array_equal(again, pairs)
+        assert any(len(k) for k in known_pairs) and any((pairs >= have).any(axis=1) & (pairs < have).any(axis=1))
     with pytest.raises(ValueError, match="known_pairs needs known"):
         passing_edges(D, pts, lambda a, b: (to_place, None), places, slack=0.5, known_pairs=known_pairs)

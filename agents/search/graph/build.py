@@ -659,6 +659,11 @@ def place_distances(pairwise: PairwiseFn, observations: np.ndarray, places: np.n
     return score(observations, places)[0], score(places, observations)[0]
 
 
+#: :func:`passing_edges` with ``known_pairs`` compares the pairs of up to this many other nodes (a replan's
+#: starts and goals) with all places at once, those of more place by place
+_ONE_PASS_ENDPOINTS = 8
+
+
 def _passing_block(D: np.ndarray, to_place: np.ndarray, from_place: np.ndarray, us: np.ndarray, vs: np.ndarray,
                    slack: float, d_max: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
     """The pairs of ``us x vs`` whose edge passes one place (``to_place[u]``, ``from_place[v]``: the
@@ -718,6 +723,13 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
             us, vs = _near_place(to_place[:, j], from_place[j], slack, d_max)
             u, v = _passing_block(D, to_place[:, j], from_place[j], us, vs, slack, d_max)
             found.append(u.astype(np.int64) * m + v)
+    elif m - have > _ONE_PASS_ENDPOINTS:
+        found += [np.asarray(k, dtype=np.int64).reshape(-1, 2) @ np.array([m, 1], np.int64) for k in known_pairs]
+        for j in range(len(places)):  # the pairs with another node, place by place
+            us, vs = _near_place(to_place[:, j], from_place[j], slack, d_max)
+            for rows, cols in ((us, vs[vs >= have]), (us[us >= have], vs[vs < have])):
+                u, v = _passing_block(D, to_place[:, j], from_place[j], rows, cols, slack, d_max)
+                found.append(u.astype(np.int64) * m + v)
     else:
         found += [np.asarray(k, dtype=np.int64).reshape(-1, 2) @ np.array([m, 1], np.int64) for k in known_pairs]
         # the pairs with another node, all places at once: an edge passes one of them where the shortest
