@@ -180,7 +180,7 @@ def execute(
                           replanning=config.replanning, budget=config.budget, seed=seed,
                           fallback_model=models[method.fallback] if method.fallback else None,
                           memory=memory if method.search else None, safety=safety,
-                          bound=env.min_steps if env.obs_type == "vector" else None)
+                          bound=env.step_bound() if env.obs_type == "vector" else None)
     k = len(names)
     index = {a: i for i, a in enumerate(names)}
     cost = np.zeros(k)

@@ -83,8 +83,8 @@ REFERENCE_EDGE_STEPS = 600
 REFERENCE_BUFFER_NODES = 1000
 #: the cost :meth:`BufferPlanner.from_agent` with a ``bound`` gives the pairs it never read (never an edge)
 UNREAD_COST = 1e9
-#: places to avoid (parked agents' observations) whose distances a planner keeps per ``d_max``; past it,
-#: it starts over (1000 agents' goals on a 4000-node buffer: about 32 MB)
+#: places to avoid (parked agents' observations) whose distances and passing edges a planner keeps per
+#: ``d_max``; past it, it starts over (1000 agents' goals on a 4000-node buffer: about 32 MB)
 _KEPT_PLACES = 4096
 
 
@@ -274,9 +274,8 @@ class BufferPlanner:
         self._passing: Optional[Tuple[Tuple[Any, ...], np.ndarray]] = None
         #: the buffer nodes' distances to and from each place to avoid met so far, by d_max and place (they
         #: outlive the endpoints and the set of places: a parked agent's stay scored once)
-        self._places: Dict[float, Dict[bytes, Tuple[np.ndarray, np.ndarray]]] = {}
-        #: and the buffer's edges that pass each of them, by d_max and slack (:func:`place_passing`)
-        self._place_pairs: Dict[Tuple[float, float], Dict[bytes, np.ndarray]] = {}
+        #: and, by slack, the buffer's edges that pass each of them (:func:`place_passing`)
+        self._places: Dict[float, Dict[bytes, Tuple[np.ndarray, np.ndarray, Dict[float, np.ndarray]]]] = {}
         #: the buffer's edges shorter than d_max, by d_max (shared by the planners over the same matrices), and
         #: the candidate edges of the last endpoints attached
         self._short: Dict[float, EdgeList] = {}
@@ -349,7 +348,6 @@ class BufferPlanner:
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver,
                             second_opinion=self.second_opinion)
         out._long_legs, out._short, out._places = self._long_legs, self._short, self._places
-        out._place_pairs = self._place_pairs
         return out
 
     def with_options(self, second_opinion: Any = _KEEP, **changes: Any) -> "BufferPlanner":
@@ -359,7 +357,7 @@ class BufferPlanner:
         graph, solver = _vary(self.graph, self.solver_config, changes)
         opinion = self.second_opinion if second_opinion is _KEEP else second_opinion
         out = BufferPlanner(self.observations, self.D, self.C, self.pairwise, graph, solver, second_opinion=opinion)
-        out._short, out._places, out._place_pairs = self._short, self._places, self._place_pairs
+        out._short, out._places = self._short, self._places
         if out.second_opinion is self.second_opinion:
             out._long_legs = self._long_legs
         return out
@@ -395,10 +393,10 @@ class BufferPlanner:
             k2 = (key, at.shape, at.tobytes())
             if self._passing is None or self._passing[0] != k2:
                 D2, _, obs = self._attached[1]
-                slack = g.proximity_radius or 0
-                known = self._place_distances(at)
+                slack = float(g.proximity_radius or 0)
+                known, pairs = self._avoided_places(at, slack)
                 self._passing = (k2, passing_edges(D2, obs, self.pairwise, at, slack, g.d_max, known=known,
-                                                   known_pairs=self._place_pairs_of(at, known, slack)))
+                                                   known_pairs=pairs))
             passing = self._passing[1]
         return build_problem_graph(self.observations, self.D, self.C, self.pairwise, starts, goals,
                                    d_max=g.d_max, c_max=g.c_max, endpoint_edges=g.endpoint_edges,
@@ -409,10 +407,12 @@ class BufferPlanner:
                                    goal_detached=goal_detached, attached=self._attached[1], passing=passing,
                                    max_leg=g.max_leg, long_edges=self._long_edges(key), edges=self._edges)
 
-    def _place_distances(self, at: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """:func:`~agents.search.graph.build.place_distances` of the buffer to the places ``at``: each place
-        is scored once per ``d_max``, on its own, and kept (at most :data:`_KEPT_PLACES` of them), so that
-        what a replan reads does not depend on the replans before it."""
+    def _avoided_places(self, at: np.ndarray, slack: float) -> Tuple[Tuple[np.ndarray, np.ndarray], List[np.ndarray]]:
+        """What the buffer knows of the places ``at``: :func:`~agents.search.graph.build.place_distances` of
+        the buffer to them, ``(N, P)`` and ``(P, N)``, and per place the buffer's edges that pass it
+        (:func:`~agents.search.graph.build.place_passing`). Each place is scored once per ``d_max``, on its
+        own, and kept with its edges by ``slack`` (at most :data:`_KEPT_PLACES` places), so that what a
+        replan reads does not depend on the replans before it."""
         d_max = self.graph.d_max
         kept = self._places.setdefault(d_max, {})
         keys = [row.tobytes() for row in at]
@@ -424,21 +424,13 @@ class BufferPlanner:
         for k, i in first.items():
             if k not in kept:  # one at a time: a place's distances do not depend on which others were new with it
                 to_place, from_place = place_distances(self.pairwise, self.observations, at[i:i + 1], d_max)
-                kept[k] = (to_place[:, 0], from_place[0])
-        return np.stack([kept[k][0] for k in keys], axis=1), np.stack([kept[k][1] for k in keys], axis=0)
-
-    def _place_pairs_of(self, at: np.ndarray, known: Tuple[np.ndarray, np.ndarray], slack: float) -> List[np.ndarray]:
-        """Per place of ``at``, the buffer's edges that pass it (:func:`place_passing`, from the place's
-        distances ``known``), each found once per ``d_max`` and ``slack`` and kept (at most
-        :data:`_KEPT_PLACES` places)."""
-        kept = self._place_pairs.setdefault((self.graph.d_max, float(slack)), {})
-        keys = [row.tobytes() for row in at]
-        if len(kept) + len(set(keys) - set(kept)) > _KEPT_PLACES:
-            kept.clear()
-        for j, k in enumerate(keys):
-            if k not in kept:
-                kept[k] = place_passing(self.D, known[0][:, j], known[1][j], slack, self.graph.d_max)
-        return [kept[k] for k in keys]
+                kept[k] = (to_place[:, 0], from_place[0], {})
+        records = [kept[k] for k in keys]
+        for to_place, from_place, passing in records:
+            if slack not in passing:
+                passing[slack] = place_passing(self.D, to_place, from_place, slack, d_max)
+        known = np.stack([r[0] for r in records], axis=1), np.stack([r[1] for r in records], axis=0)
+        return known, [r[2][slack] for r in records]
 
     def _short_edges(self) -> EdgeList:
         """The buffer's edges shorter than ``d_max`` (found once per ``d_max``)."""

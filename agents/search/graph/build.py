@@ -659,8 +659,8 @@ def place_distances(pairwise: PairwiseFn, observations: np.ndarray, places: np.n
     return score(observations, places)[0], score(places, observations)[0]
 
 
-#: :func:`passing_edges` with ``known_pairs`` compares the pairs of up to this many other nodes (a replan's
-#: starts and goals) with all places at once, those of more place by place
+#: :func:`passing_edges` reads ``known_pairs`` where at most this many other nodes (a replan's starts and
+#: goals) are to be compared, all places at once; with more it compares every pair place by place
 _ONE_PASS_ENDPOINTS = 8
 
 
@@ -708,7 +708,8 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
     :func:`place_distances` gives for the first observations (a buffer's, whose distances to parked
     agents do not change from one replan to the next); only the others are scored. ``known_pairs``
     (with ``known``): per place, the pairs among those first observations that pass it
-    (:func:`place_passing` of their block of ``D``); then only pairs with another node are compared."""
+    (:func:`place_passing` of their block of ``D``); then, where the others are few, only pairs with
+    one of them are compared."""
     have = 0 if known is None else len(known[0])
     if known_pairs is not None and (known is None or len(known_pairs) != len(places)):
         raise ValueError("known_pairs needs known, and one array of pairs per place")
@@ -718,18 +719,11 @@ def passing_edges(D: np.ndarray, observations: np.ndarray, pairwise: PairwiseFn,
         from_place = np.concatenate([known[1], from_place], axis=1)
     m = len(observations)
     found = []
-    if known_pairs is None:
+    if known_pairs is None or m - have > _ONE_PASS_ENDPOINTS:
         for j in range(len(places)):
             us, vs = _near_place(to_place[:, j], from_place[j], slack, d_max)
             u, v = _passing_block(D, to_place[:, j], from_place[j], us, vs, slack, d_max)
             found.append(u.astype(np.int64) * m + v)
-    elif m - have > _ONE_PASS_ENDPOINTS:
-        found += [np.asarray(k, dtype=np.int64).reshape(-1, 2) @ np.array([m, 1], np.int64) for k in known_pairs]
-        for j in range(len(places)):  # the pairs with another node, place by place
-            us, vs = _near_place(to_place[:, j], from_place[j], slack, d_max)
-            for rows, cols in ((us, vs[vs >= have]), (us[us >= have], vs[vs < have])):
-                u, v = _passing_block(D, to_place[:, j], from_place[j], rows, cols, slack, d_max)
-                found.append(u.astype(np.int64) * m + v)
     else:
         found += [np.asarray(k, dtype=np.int64).reshape(-1, 2) @ np.array([m, 1], np.int64) for k in known_pairs]
         # the pairs with another node, all places at once: an edge passes one of them where the shortest
